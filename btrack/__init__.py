@@ -1,0 +1,1 @@
+"""btrack: distributed boundary tracking with workload and phase balancing."""

@@ -1,0 +1,3 @@
+from btrack.cli import main
+
+raise SystemExit(main())

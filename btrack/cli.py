@@ -1,0 +1,37 @@
+"""The ``btrack`` command: one subcommand per process or tool.
+
+Each subcommand lives in its own package and is imported only when used, so
+``btrack agent`` on a robot computer never loads the simulator or matplotlib.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+COMMANDS: dict[str, tuple[str, str]] = {
+    "sim": ("deploy.launcher", "run a simulated team: world, recorder and N agents"),
+    "agent": ("agent.process", "one robot's controller (meant for the robot's own computer)"),
+    "world": ("simworld.process", "the simulator: maps, kinematics, sensors, the clock"),
+    "record": ("recorder.process", "record everything on the bus into an MCAP file"),
+    "report": ("report.cli", "measures, summary.json and figures from a recorded run"),
+}
+
+
+def usage() -> str:
+    lines = ["usage: btrack COMMAND [options]   (btrack COMMAND --help for each)", "", "commands:"]
+    lines += [f"  {name:<8} {help_}" for name, (_, help_) in COMMANDS.items()]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if not argv or argv[0] in ("-h", "--help", "help"):
+        print(usage())
+        return 0
+    name, rest = argv[0], argv[1:]
+    if name not in COMMANDS:
+        print(f"btrack: unknown command {name!r}\n\n{usage()}", file=sys.stderr)
+        return 2
+    module = importlib.import_module(COMMANDS[name][0])
+    return int(module.main(rest) or 0)

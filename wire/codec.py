@@ -1,0 +1,99 @@
+"""msgpack encoding of the message dataclasses, with validation on decode.
+
+Decoding never raises anything but ``DecodeError``: wrong type, missing or extra
+field, NaN or infinity, or a range rule of the message (its ``check``) all end there,
+so a process counts and drops the message and keeps running.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import typing
+from functools import cache
+from typing import Any, TypeVar
+
+import msgpack
+
+from wire.messages import InvalidMessage
+
+T = TypeVar("T")
+
+MSGPACK = "application/msgpack"
+
+
+class DecodeError(ValueError):
+    """A payload that is not a valid message of the expected type."""
+
+
+def encode(msg: Any) -> bytes:
+    """The msgpack bytes of a message dataclass (a map of field name to value)."""
+    return msgpack.packb(dataclasses.asdict(msg), use_bin_type=True)
+
+
+@cache
+def _field_types(cls: type) -> dict[str, Any]:
+    hints = typing.get_type_hints(cls)
+    return {f.name: hints[f.name] for f in dataclasses.fields(cls)}
+
+
+@cache
+def _required(cls: type) -> frozenset[str]:
+    return frozenset(
+        f.name
+        for f in dataclasses.fields(cls)
+        if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+    )
+
+
+def _coerce(name: str, value: Any, hint: Any) -> Any:
+    if hint is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise DecodeError(f"{name}: expected a number, got {type(value).__name__}")
+        value = float(value)
+        if not math.isfinite(value):
+            raise DecodeError(f"{name}: not finite ({value})")
+        return value
+    if hint is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise DecodeError(f"{name}: expected an integer, got {type(value).__name__}")
+        return value
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise DecodeError(f"{name}: expected a boolean, got {type(value).__name__}")
+        return value
+    if hint is str:
+        if not isinstance(value, str):
+            raise DecodeError(f"{name}: expected a string, got {type(value).__name__}")
+        return value
+    origin = typing.get_origin(hint)
+    if origin is list:
+        (item,) = typing.get_args(hint)
+        if not isinstance(value, (list, tuple)):
+            raise DecodeError(f"{name}: expected a list, got {type(value).__name__}")
+        return [_coerce(f"{name}[{i}]", v, item) for i, v in enumerate(value)]
+    raise DecodeError(f"{name}: unsupported field type {hint}")  # pragma: no cover
+
+
+def decode(cls: type[T], payload: bytes) -> T:
+    """Decode and validate ``payload`` as a ``cls`` message, or raise ``DecodeError``."""
+    try:
+        raw = msgpack.unpackb(payload, raw=False, strict_map_key=True)
+    except Exception as exc:  # msgpack raises several unrelated types on garbage
+        raise DecodeError(f"not msgpack: {exc}") from None
+    if not isinstance(raw, dict):
+        raise DecodeError(f"expected a map, got {type(raw).__name__}")
+    types = _field_types(cls)
+    missing = _required(cls) - raw.keys()
+    if missing:
+        raise DecodeError(f"missing field(s): {', '.join(sorted(missing))}")
+    extra = raw.keys() - types.keys()
+    if extra:
+        raise DecodeError(f"unknown field(s): {', '.join(sorted(map(str, extra)))}")
+    values = {name: _coerce(name, raw[name], types[name]) for name in raw}
+    msg = cls(**values)
+    try:
+        msg.check()  # type: ignore[attr-defined]
+    except InvalidMessage as exc:
+        raise DecodeError(str(exc)) from None
+    return msg

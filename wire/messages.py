@@ -1,0 +1,166 @@
+"""Message types on the bus. Every message carries its simulation (or wall) time ``t``
+and tick ``k``; nothing downstream reads a clock of its own.
+
+Field types are checked on decode by ``wire.codec``; each class's ``check`` adds the
+range rules (a boundary outside the edge, a phase outside [0, 2 pi), ...).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+TWO_PI = 2.0 * math.pi
+
+
+class InvalidMessage(ValueError):
+    """A message whose fields are well typed but out of range."""
+
+
+def _require(cond: bool, why: str) -> None:
+    if not cond:
+        raise InvalidMessage(why)
+
+
+@dataclass(frozen=True)
+class Sense:
+    """What robot ``robot``'s own sensors report at tick ``k`` (world/bridge -> agent)."""
+
+    t: float
+    k: int
+    robot: int
+    ice: bool  # the upward sensor sees ice overhead
+    algae: bool  # the algae sensor sees algae overhead
+    odom_dist_m: float  # distance driven since the previous tick (odometry)
+    odom_dtheta: float  # heading change since the previous tick (odometry), rad
+    edge_lo: float  # s_0 of the whole edge, m
+    edge_hi: float  # s_n of the whole edge, m
+    dt: float  # control period, s
+
+    def check(self) -> None:
+        _require(self.t >= 0 and self.k >= 0 and self.robot >= 0, "negative t, k or robot")
+        _require(self.edge_lo < self.edge_hi, "edge_lo must be below edge_hi")
+        _require(self.dt > 0, "dt must be positive")
+
+
+@dataclass(frozen=True)
+class Pose:
+    """An estimate of robot ``robot``'s pose (localizer or world -> agent)."""
+
+    t: float
+    k: int
+    robot: int
+    x: float
+    y: float
+    theta: float
+    cov: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])  # var x, y, theta
+    source: str = "truth"  # truth | odometry | pf
+
+    def check(self) -> None:
+        _require(self.t >= 0 and self.k >= 0 and self.robot >= 0, "negative t, k or robot")
+        _require(len(self.cov) == 3 and all(c >= 0 for c in self.cov), "cov: three variances")
+        _require(self.source in ("truth", "odometry", "pf"), f"unknown source {self.source!r}")
+
+
+@dataclass(frozen=True)
+class Truth:
+    """Ground truth pose of a simulated robot (world -> recorder only)."""
+
+    t: float
+    k: int
+    robot: int
+    x: float
+    y: float
+    theta: float
+
+    def check(self) -> None:
+        _require(self.t >= 0 and self.k >= 0 and self.robot >= 0, "negative t, k or robot")
+
+
+@dataclass(frozen=True)
+class Cmd:
+    """Velocity command for robot ``robot`` at tick ``k`` (agent -> world/bridge)."""
+
+    t: float
+    k: int
+    robot: int
+    v: float  # forward speed, m/s
+    omega: float  # turn rate, rad/s
+
+    def check(self) -> None:
+        _require(self.t >= 0 and self.k >= 0 and self.robot >= 0, "negative t, k or robot")
+        _require(abs(self.v) <= 10.0 and abs(self.omega) <= 100.0, "command out of range")
+
+
+@dataclass(frozen=True)
+class AgentState:
+    """What agent ``robot`` tells its neighbours after tick ``k``: its segment
+    [lo, hi], phase, desired phase and workload (thesis ch. 3-4)."""
+
+    t: float
+    k: int
+    robot: int
+    lo: float  # s_i, m
+    hi: float  # s_{i+1}, m
+    phase: float  # phi_i in [0, 2 pi), position-based (eq. 3.1)
+    phase_des: float  # phi_des,i in [0, 2 pi)
+    workload: float  # Psi_i = d_a,i * (s_{i+1} - s_i), m^2
+    depth_avg: float  # d_a,i, m
+    direction: int  # +1 travelling towards hi, -1 towards lo
+    lower: int  # id of the lower neighbour, -1 if none
+    upper: int  # id of the upper neighbour, -1 if none
+    edge_lo: float
+    edge_hi: float
+
+    def check(self) -> None:
+        _require(self.t >= 0 and self.k >= 0 and self.robot >= 0, "negative t, k or robot")
+        _require(self.edge_lo <= self.lo < self.hi <= self.edge_hi, "boundaries outside the edge")
+        _require(0.0 <= self.phase < TWO_PI, "phase outside [0, 2 pi)")
+        _require(0.0 <= self.phase_des < TWO_PI, "phase_des outside [0, 2 pi)")
+        _require(self.workload >= 0 and self.depth_avg >= 0, "negative workload or depth")
+        _require(self.direction in (-1, 1), "direction must be +1 or -1")
+        _require(self.lower >= -1 and self.upper >= -1, "neighbour ids must be >= -1")
+
+
+@dataclass(frozen=True)
+class Tick:
+    """The world's clock: tick ``k`` at time ``t`` was stepped with these live agents."""
+
+    t: float
+    k: int
+    live: list[int]
+    waited_ms: float = 0.0  # wall time spent waiting for commands
+    done: bool = False  # the last tick of the run
+
+    def check(self) -> None:
+        _require(self.t >= 0 and self.k >= 0, "negative t or k")
+
+
+@dataclass(frozen=True)
+class WorldInfo:
+    """The scenario, for the recorder and reports: edge, true patrol depth per bin,
+    run parameters. Published by the world at start and every few seconds."""
+
+    map: str
+    start: str
+    robots: int
+    localization: str
+    seed: int
+    duration_s: float
+    dt: float
+    edge_lo: float
+    edge_hi: float
+    bin_m: float
+    patrol_depth: list[float]  # true patrol depth per bin from edge_lo, m
+    robot_radius: float
+    min_depth: float
+    margin_out: float
+    realtime: bool = False
+
+    def check(self) -> None:
+        _require(self.edge_lo < self.edge_hi and self.bin_m > 0, "bad edge or bin")
+        _require(all(d >= 0 for d in self.patrol_depth), "negative patrol depth")
+        _require(self.robots >= 1 and self.dt > 0, "bad robots or dt")
+
+
+ALL_TYPES = (Sense, Pose, Truth, Cmd, AgentState, Tick, WorldInfo)

@@ -1,0 +1,129 @@
+"""Zenoh session configuration shared by every process.
+
+Precedence, lowest first: zenoh's defaults with peer mode, a JSON5 file
+(``--zenoh-config`` or ``ZENOH_CONFIG`` in the environment), then the command line
+(``--mode``, ``--connect``, ``--listen``, ``--no-multicast``, ``--lease``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import zenoh
+
+
+@dataclass(frozen=True)
+class SessionOptions:
+    ns: str = "btrack"
+    mode: str | None = None  # peer | client | router; None keeps the file's (or peer)
+    connect: tuple[str, ...] = ()
+    listen: tuple[str, ...] = ()
+    multicast: bool | None = None  # None keeps the file's (or zenoh's default)
+    lease_s: float | None = None  # transport lease this session announces
+    config_file: str | None = None
+    extra: dict[str, str] = field(default_factory=dict)  # json5 path -> json5 value
+
+    def to_args(self) -> list[str]:
+        """Command-line arguments that reproduce these options in a child process."""
+        args = ["--ns", self.ns]
+        if self.mode:
+            args += ["--mode", self.mode]
+        for ep in self.connect:
+            args += ["--connect", ep]
+        for ep in self.listen:
+            args += ["--listen", ep]
+        if self.multicast is False:
+            args.append("--no-multicast")
+        if self.lease_s is not None:
+            args += ["--lease", repr(self.lease_s)]
+        if self.config_file:
+            args += ["--zenoh-config", self.config_file]
+        return args
+
+
+def add_session_args(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("bus (Zenoh)")
+    group.add_argument("--ns", default="btrack", help="run namespace: every key starts with it")
+    group.add_argument("--mode", choices=["peer", "client", "router"], help="default: peer")
+    group.add_argument(
+        "--connect", action="append", default=[], metavar="ENDPOINT",
+        help="endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)",
+    )
+    group.add_argument(
+        "--listen", action="append", default=[], metavar="ENDPOINT",
+        help="endpoint to listen on, e.g. tcp/127.0.0.1:0 (repeatable)",
+    )
+    group.add_argument(
+        "--no-multicast", action="store_true", help="turn off multicast scouting"
+    )
+    group.add_argument(
+        "--lease", type=float, metavar="SECONDS",
+        help="transport lease this process announces (how soon peers drop it if frozen)",
+    )
+    group.add_argument(
+        "--zenoh-config", metavar="FILE.json5",
+        help="Zenoh configuration file (default: $ZENOH_CONFIG if set)",
+    )
+
+
+def options_from_args(args: argparse.Namespace) -> SessionOptions:
+    return SessionOptions(
+        ns=args.ns,
+        mode=args.mode,
+        connect=tuple(args.connect),
+        listen=tuple(args.listen),
+        multicast=False if args.no_multicast else None,
+        lease_s=args.lease,
+        config_file=args.zenoh_config,
+    )
+
+
+def build_config(opts: SessionOptions, env: dict[str, str] | None = None) -> zenoh.Config:
+    env = os.environ if env is None else env
+    path = opts.config_file or env.get("ZENOH_CONFIG")
+    if path:
+        try:
+            conf = zenoh.Config.from_file(path)
+        except Exception as exc:
+            raise SystemExit(f"cannot load Zenoh configuration {path}: {exc}") from None
+    else:
+        conf = zenoh.Config()
+        conf.insert_json5("mode", json.dumps(opts.mode or "peer"))
+    if opts.mode:
+        conf.insert_json5("mode", json.dumps(opts.mode))
+    if opts.connect:
+        conf.insert_json5("connect/endpoints", json.dumps(list(opts.connect)))
+    if opts.listen:
+        conf.insert_json5("listen/endpoints", json.dumps(list(opts.listen)))
+    if opts.multicast is not None:
+        conf.insert_json5("scouting/multicast/enabled", json.dumps(opts.multicast))
+    if opts.lease_s is not None:
+        conf.insert_json5("transport/link/tx/lease", str(max(1, int(opts.lease_s * 1000))))
+    for key, value in opts.extra.items():
+        conf.insert_json5(key, value)
+    return conf
+
+
+def open_session(opts: SessionOptions) -> zenoh.Session:
+    zenoh.try_init_log_from_env()
+    return zenoh.open(build_config(opts))
+
+
+def loopback_options(ns: str, hub_port: int, listen: bool = True) -> SessionOptions:
+    """Options for a process of a local team: multicast off, connect to the hub on
+    loopback, and listen on an ephemeral loopback port so peers can link directly."""
+    return SessionOptions(
+        ns=ns,
+        mode="peer",
+        connect=(f"tcp/127.0.0.1:{hub_port}",),
+        listen=("tcp/127.0.0.1:0",) if listen else (),
+        multicast=False,
+    )
+
+
+def endpoints(values: Sequence[str]) -> tuple[str, ...]:
+    return tuple(v for v in values if v)
