@@ -111,9 +111,11 @@ class AgentState:
     upper: int  # id of the upper neighbour, -1 if none
     edge_lo: float
     edge_hi: float
+    dropped: int = 0  # malformed messages this agent has counted and dropped so far
 
     def check(self) -> None:
         _require(self.t >= 0 and self.k >= 0 and self.robot >= 0, "negative t, k or robot")
+        _require(self.dropped >= 0, "negative dropped count")
         _require(self.edge_lo <= self.lo < self.hi <= self.edge_hi, "boundaries outside the edge")
         _require(0.0 <= self.phase < TWO_PI, "phase outside [0, 2 pi)")
         _require(0.0 <= self.phase_des < TWO_PI, "phase_des outside [0, 2 pi)")

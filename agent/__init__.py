@@ -1,0 +1,1 @@
+"""One robot's controller: a pure core (partition, phase, patrol) and a thin process."""

@@ -1,0 +1,48 @@
+"""Workload balance: the boundary update of thesis eq. 4.1-4.3, for a whole chain
+(reference and tests) and as the distributed rule each agent applies to the
+boundary it shares with one neighbour."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class SegmentView:
+    """What a robot has published about its segment at the previous tick."""
+
+    lo: float
+    hi: float
+    workload: float
+
+
+def chain_update(
+    boundaries: Sequence[float], workloads: Sequence[float], k_s: float, min_len: float
+) -> list[float]:
+    """S_{t+1} = S_t + U_s (eq. 4.1, 4.3): each inner boundary moves by
+    K_s (Psi_{i+1} - Psi_i), the ends stay. Each move is limited to half the slack
+    of both segments beside it, so no segment gets shorter than ``min_len``."""
+    s = list(boundaries)
+    out = list(s)
+    for j in range(1, len(s) - 1):
+        lower = SegmentView(s[j - 1], s[j], workloads[j - 1])
+        upper = SegmentView(s[j], s[j + 1], workloads[j])
+        out[j] = shared_boundary(lower, upper, k_s, min_len)
+    return out
+
+
+def shared_boundary(
+    lower: SegmentView, upper: SegmentView, k_s: float, min_len: float
+) -> float:
+    """The new boundary between two neighbouring robots, eq. 4.3.
+
+    Both neighbours evaluate this on the same published values and so agree on the
+    result without a further exchange. Where their views of the boundary differ (a
+    robot between them left), they meet in the middle of the gap.
+    """
+    ref = 0.5 * (lower.hi + upper.lo)
+    move = k_s * (upper.workload - lower.workload)
+    down_room = max(0.0, 0.5 * (ref - lower.lo - min_len))
+    up_room = max(0.0, 0.5 * (upper.hi - ref - min_len))
+    return ref + min(max(move, -down_room), up_room)

@@ -1,0 +1,181 @@
+"""The lawnmower patrol of thesis chapter 6 as a state machine, and the robot's
+depth map from which its workload is measured.
+
+Five motions: (1) ENTER: forward until the upward sensor sees the ice edge;
+(2) UNDER: on under the ice while algae is seen, at least ``min_depth_m``;
+(3) TURN_UNDER: a 180 degree arc; (4) EXIT: back out until ``margin_out_m`` past
+the edge; (5) TURN_OUT: another 180 degree arc. Each arc moves the robot one pass
+along the edge, towards ``hi`` or ``lo``; the direction reverses when the next pass
+would leave the segment. Every robot makes the same number of passes per sweep
+(the pass spacing scales with its segment), so robots with equal work step their
+phases together.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from enum import Enum
+
+from agent.phase import wrap_pi
+
+HALF_PI = 0.5 * math.pi
+
+
+class Motion(Enum):
+    ENTER = 1
+    UNDER = 2
+    TURN_UNDER = 3
+    EXIT = 4
+    TURN_OUT = 5
+
+
+@dataclass(frozen=True)
+class PatrolConfig:
+    min_depth_m: float = 0.3
+    margin_out_m: float = 0.3
+    max_depth_m: float = 5.0  # turn back regardless, in case a sensor fails
+    passes_per_sweep: int = 12
+    min_turn_radius_m: float = 0.04
+    max_turn_radius_m: float = 0.2
+    heading_gain: float = 4.0  # curvature per rad of heading error, 1/m
+    line_gain: float = 3.0  # heading correction per m off the pass line, rad/m
+    max_curvature: float = 10.0  # 1/m
+    bin_m: float = 0.1  # resolution of the depth map
+
+    def __post_init__(self) -> None:
+        if self.passes_per_sweep < 1:
+            raise ValueError("passes_per_sweep must be at least 1")
+        if not 0 < self.min_turn_radius_m <= self.max_turn_radius_m:
+            raise ValueError("need 0 < min_turn_radius_m <= max_turn_radius_m")
+        if self.min_depth_m <= 0 or self.margin_out_m <= 0 or self.bin_m <= 0:
+            raise ValueError("depths, margin and bin must be positive")
+
+
+@dataclass
+class DepthMap:
+    """Patrol depth the robot measured at each bin along the edge (latest wins)."""
+
+    edge_lo: float
+    bin_m: float
+    default_m: float
+    depths: dict[int, float] = field(default_factory=dict)
+
+    def record(self, s: float, depth: float) -> None:
+        self.depths[int(math.floor((s - self.edge_lo) / self.bin_m))] = depth
+
+    def average(self, lo: float, hi: float) -> float:
+        """d_a over [lo, hi]: length-weighted mean of the measured profile, each bin
+        not measured taking its nearest measured bin; ``default_m`` if none is."""
+        if not self.depths or hi <= lo:
+            return self.default_m
+        known = sorted(self.depths)
+        first = int(math.floor((lo - self.edge_lo) / self.bin_m))
+        last = int(math.floor((hi - self.edge_lo) / self.bin_m))
+        total = 0.0
+        j = 0
+        for b in range(first, last + 1):
+            b_lo = max(lo, self.edge_lo + b * self.bin_m)
+            b_hi = min(hi, self.edge_lo + (b + 1) * self.bin_m)
+            if b_hi <= b_lo:
+                continue
+            while j + 1 < len(known) and abs(known[j + 1] - b) <= abs(known[j] - b):
+                j += 1
+            total += (b_hi - b_lo) * self.depths[known[j]]
+        return total / (hi - lo)
+
+
+@dataclass(frozen=True)
+class Steer:
+    """The patrol's steering: a curvature (omega = v * curvature)."""
+
+    curvature: float
+    motion: Motion
+
+
+class Patrol:
+    """The lawnmower state machine. Pure: feed it pose and sensing each tick."""
+
+    def __init__(self, config: PatrolConfig, depth_map: DepthMap, x: float, direction: int = 1):
+        self.config = config
+        self.depth_map = depth_map
+        self.motion = Motion.ENTER
+        self.direction = 1 if direction >= 0 else -1
+        self.line_x = x  # the pass line the straight legs hold
+        self.entry_y: float | None = None  # where the ice edge was seen on the way in
+        self.exit_y: float | None = None  # where it was left on the way out
+        self.turn_sign = 0  # +1 left (counter-clockwise), -1 right
+        self.turn_radius = config.max_turn_radius_m
+        self.turned = 0.0  # rotation so far in the current arc, rad
+        self.prev_theta: float | None = None
+        self.last_depth: float | None = None
+
+    def spacing(self, lo: float, hi: float) -> float:
+        c = self.config
+        raw = (hi - lo) / c.passes_per_sweep
+        return min(max(raw, 2 * c.min_turn_radius_m), 2 * c.max_turn_radius_m)
+
+    def _start_turn(self, lo: float, hi: float, heading_in: bool) -> None:
+        """Choose the direction along the edge, then the arc that moves one pass."""
+        step = self.spacing(lo, hi)
+        if not lo <= self.line_x <= hi:
+            # The segment moved away from under the robot: head back at the widest pass.
+            self.direction = 1 if self.line_x < lo else -1
+            step = 2 * self.config.max_turn_radius_m
+        else:
+            nxt = self.line_x + self.direction * step
+            if nxt > hi or nxt < lo:
+                self.direction = -self.direction
+                back = self.line_x + self.direction * step
+                if back > hi or back < lo:  # narrower than a pass: head for the middle
+                    self.direction = 1 if self.line_x < 0.5 * (lo + hi) else -1
+        self.line_x += self.direction * step
+        self.turn_radius = 0.5 * step
+        # Heading +y, going +x is a right (clockwise) turn; heading -y it is a left one.
+        self.turn_sign = -self.direction if heading_in else self.direction
+        self.turned = 0.0
+
+    def _hold_line(self, x: float, theta: float, heading: float) -> float:
+        c = self.config
+        offset = x - self.line_x
+        # Heading +y, a small turn to the left moves -x; heading -y, to the right.
+        correction = math.atan(c.line_gain * offset)
+        desired = heading + correction if heading > 0 else heading - correction
+        k = c.heading_gain * wrap_pi(desired - theta)
+        return min(max(k, -c.max_curvature), c.max_curvature)
+
+    def step(self, x: float, y: float, theta: float, ice: bool, algae: bool,
+             lo: float, hi: float) -> Steer:
+        c = self.config
+        rotation = 0.0 if self.prev_theta is None else wrap_pi(theta - self.prev_theta)
+        self.prev_theta = theta
+        if self.motion is Motion.ENTER:
+            if ice:
+                self.entry_y = y
+                self.motion = Motion.UNDER
+        if self.motion is Motion.UNDER:
+            depth = y - (self.entry_y if self.entry_y is not None else y)
+            if (depth >= c.min_depth_m and not algae) or depth >= c.max_depth_m:
+                self.last_depth = max(c.min_depth_m, depth)
+                self.depth_map.record(self.line_x, self.last_depth)
+                self._start_turn(lo, hi, heading_in=True)
+                self.motion = Motion.TURN_UNDER
+        elif self.motion is Motion.EXIT:
+            if not ice and self.exit_y is None:
+                self.exit_y = y
+            if self.exit_y is not None and y <= self.exit_y - c.margin_out_m:
+                self._start_turn(lo, hi, heading_in=False)
+                self.motion = Motion.TURN_OUT
+        if self.motion in (Motion.TURN_UNDER, Motion.TURN_OUT):
+            self.turned += self.turn_sign * rotation
+            if self.turned >= math.pi - 0.03:
+                if self.motion is Motion.TURN_UNDER:
+                    self.motion = Motion.EXIT
+                    self.exit_y = None
+                else:
+                    self.motion = Motion.ENTER
+                    self.entry_y = None
+            else:
+                return Steer(self.turn_sign / self.turn_radius, self.motion)
+        heading = HALF_PI if self.motion in (Motion.ENTER, Motion.UNDER) else -HALF_PI
+        return Steer(self._hold_line(x, theta, heading), self.motion)

@@ -1,0 +1,265 @@
+"""``btrack agent``: one robot's controller as its own process.
+
+It hears its own robot (sense, pose) and the states of its two neighbours (the
+nearest live lower and higher ids, from Zenoh liveliness), runs the control core
+once per tick and publishes its state and its robot's command. Malformed messages
+are counted and dropped; nothing on the bus can kill it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import queue
+import signal
+import sys
+import time
+from collections.abc import Callable
+from typing import Any
+
+import zenoh
+
+from agent import config as agent_config
+from agent.controller import Controller, Neighbour, initial_segment
+from agent.stability import check_gains
+from wire import AgentState, Cmd, DecodeError, Keys, Pose, Sense, decode, encode
+from wire.codec import MSGPACK
+from wire.session import add_session_args, open_session, options_from_args
+
+HISTORY = 8  # neighbour states kept per neighbour, by tick
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="btrack agent", description=__doc__.splitlines()[0])
+    p.add_argument("--id", type=int, required=True, help="this robot's id (0-based)")
+    p.add_argument("--robots", type=int, required=True,
+                   help="team size: sets the initial equal segment and the gain check")
+    p.add_argument("--config", metavar="FILE.toml",
+                   help="[gains], [patrol] and [limits] tables (see README)")
+    p.add_argument("--k-s", type=float, help="workload gain K_s (eq. 4.3)")
+    p.add_argument("--k-phi", type=float, help="phase consensus gain K_phi (eq. 4.7)")
+    p.add_argument("--k-v", type=float, help="speed gain K_v, m/s per rad (eq. 4.10)")
+    p.add_argument("--cycle-s", type=float, help="common cycle period, s")
+    p.add_argument("--passes", type=int, help="passes per sweep of the segment")
+    p.add_argument("--max-depth", type=float, default=2.0,
+                   help="deepest patrol expected, m, for the K_s stability check")
+    p.add_argument("--neighbour-timeout", type=float, default=1.0,
+                   help="wall seconds to wait for a live neighbour's previous state")
+    add_session_args(p)
+    return p
+
+
+class AgentNode:
+    """The shell around one Controller: subscriptions, membership, the tick loop."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys, robot: int, team: int,
+                 gains: Any, patrol: Any, limits: Any, neighbour_timeout: float):
+        self.session = session
+        self.keys = keys
+        self.robot = robot
+        self.team = team
+        self.gains, self.patrol_cfg, self.limits = gains, patrol, limits
+        self.neighbour_timeout = neighbour_timeout
+        self.events: queue.SimpleQueue[tuple[str, Any]] = queue.SimpleQueue()
+        self.live: set[int] = set()
+        self.states: dict[int, dict[int, AgentState]] = {}
+        self.neighbour_subs: dict[int, Any] = {}
+        self.sense: Sense | None = None
+        self.pose: Pose | None = None
+        self.last_k = -1
+        self.dropped = 0
+        self.ticks = 0
+        self.controller: Controller | None = None
+        self.stopping = False
+        enc = zenoh.Encoding(MSGPACK)
+        self.pub_state = session.declare_publisher(keys.state(robot), encoding=enc)
+        self.pub_cmd = session.declare_publisher(keys.cmd(robot), encoding=enc)
+        self.subs = [
+            session.declare_subscriber(keys.sense(robot), self._on("sense")),
+            session.declare_subscriber(keys.pose(robot), self._on("pose")),
+            session.liveliness().declare_subscriber(
+                keys.alive("*"), self._on_alive, history=True
+            ),
+        ]
+        self.token = session.liveliness().declare_token(keys.alive(robot))
+
+    # Zenoh callbacks run on Zenoh's threads: they only enqueue.
+    def _on(self, kind: str) -> Callable[[zenoh.Sample], None]:
+        def callback(sample: zenoh.Sample) -> None:
+            self.events.put((kind, (str(sample.key_expr), sample.payload.to_bytes())))
+        return callback
+
+    def _on_alive(self, sample: zenoh.Sample) -> None:
+        rid = Keys.robot_of(str(sample.key_expr))
+        if rid is not None:
+            self.events.put(("alive", (rid, sample.kind == zenoh.SampleKind.PUT)))
+
+    def stop(self) -> None:
+        self.stopping = True
+        self.events.put(("stop", None))
+
+    def _drop(self, key: str, why: str) -> None:
+        self.dropped += 1
+        if self.dropped <= 20 or self.dropped % 1000 == 0:
+            print(f"agent {self.robot}: dropped message #{self.dropped} on {key}: {why}",
+                  file=sys.stderr, flush=True)
+
+    def neighbours(self) -> tuple[int | None, int | None]:
+        lower = max((r for r in self.live if r < self.robot), default=None)
+        upper = min((r for r in self.live if r > self.robot), default=None)
+        return lower, upper
+
+    def _follow_neighbours(self) -> None:
+        """Subscribe to exactly the current neighbours' state keys."""
+        wanted = {r for r in self.neighbours() if r is not None}
+        for rid in set(self.neighbour_subs) - wanted:
+            self.neighbour_subs.pop(rid).undeclare()
+            self.states.pop(rid, None)
+        for rid in wanted - set(self.neighbour_subs):
+            self.neighbour_subs[rid] = self.session.declare_subscriber(
+                self.keys.state(rid), self._on("state")
+            )
+
+    def _handle(self, kind: str, data: Any) -> None:
+        if kind == "alive":
+            rid, up = data
+            if rid != self.robot:
+                (self.live.add if up else self.live.discard)(rid)
+                self._follow_neighbours()
+            return
+        key, payload = data
+        try:
+            if kind == "sense":
+                msg = decode(Sense, payload)
+                if msg.robot != self.robot:
+                    raise DecodeError(f"sense for robot {msg.robot}")
+                self.sense = msg
+            elif kind == "pose":
+                pose = decode(Pose, payload)
+                if pose.robot != self.robot:
+                    raise DecodeError(f"pose for robot {pose.robot}")
+                self.pose = pose
+            elif kind == "state":
+                state = decode(AgentState, payload)
+                if Keys.robot_of(key) != state.robot:
+                    raise DecodeError(f"state of robot {state.robot} on {key}")
+                hist = self.states.setdefault(state.robot, {})
+                hist[state.k] = state
+                for old in [k for k in hist if k < state.k - HISTORY]:
+                    del hist[old]
+        except DecodeError as exc:
+            self._drop(key, str(exc))
+
+    def _neighbour_view(self, rid: int | None, k: int) -> Neighbour | None:
+        """The neighbour's state of tick k-1 (or the latest before k if that is missing)."""
+        if rid is None:
+            return None
+        hist = self.states.get(rid, {})
+        ks = [kk for kk in hist if kk < k]
+        if not ks:
+            return None
+        s = hist[max(ks)]
+        return Neighbour(s.robot, s.lo, s.hi, s.phase_des, s.workload)
+
+    def _neighbours_ready(self, k: int) -> bool:
+        for rid in self.neighbours():
+            if rid is not None and (k - 1) not in self.states.get(rid, {}):
+                return False
+        return True
+
+    def _ready_tick(self) -> int | None:
+        s, p = self.sense, self.pose
+        if s is None or p is None or s.k != p.k or s.k <= self.last_k:
+            return None
+        return s.k
+
+    def run(self) -> None:
+        deadline: float | None = None
+        while not self.stopping:
+            timeout = 0.5 if deadline is None else max(0.0, deadline - time.monotonic())
+            try:
+                kind, data = self.events.get(timeout=timeout)
+                if kind == "stop":
+                    break
+                self._handle(kind, data)
+                while True:  # drain what is already queued before deciding
+                    kind, data = self.events.get_nowait()
+                    if kind == "stop":
+                        return
+                    self._handle(kind, data)
+            except queue.Empty:
+                pass
+            k = self._ready_tick()
+            if k is None:
+                deadline = None
+                continue
+            if k > 0 and not self._neighbours_ready(k):
+                if deadline is None:
+                    deadline = time.monotonic() + self.neighbour_timeout
+                if time.monotonic() < deadline:
+                    continue
+            deadline = None
+            self._tick(k)
+
+    def _tick(self, k: int) -> None:
+        sense, pose = self.sense, self.pose
+        assert sense is not None and pose is not None
+        if self.controller is None:
+            lo, hi = initial_segment(self.robot, self.team, sense.edge_lo, sense.edge_hi)
+            self.controller = Controller(
+                self.robot, lo, hi, sense.edge_lo, sense.edge_hi, pose.x,
+                self.gains, self.patrol_cfg, self.limits,
+            )
+        lower_id, upper_id = self.neighbours()
+        out = self.controller.step(
+            sense.dt, pose.x, pose.y, pose.theta, sense.ice, sense.algae,
+            self._neighbour_view(lower_id, k), self._neighbour_view(upper_id, k),
+            lower_id is not None, upper_id is not None,
+        )
+        state = AgentState(
+            t=sense.t, k=k, robot=self.robot, lo=out.lo, hi=out.hi, phase=out.phase,
+            phase_des=out.phase_des, workload=out.workload, depth_avg=out.depth_avg,
+            direction=out.direction, lower=-1 if lower_id is None else lower_id,
+            upper=-1 if upper_id is None else upper_id,
+            edge_lo=sense.edge_lo, edge_hi=sense.edge_hi, dropped=self.dropped,
+        )
+        self.pub_state.put(encode(state))
+        self.pub_cmd.put(encode(Cmd(t=sense.t, k=k, robot=self.robot, v=out.v, omega=out.omega)))
+        self.last_k = k
+        self.ticks += 1
+
+    def close(self) -> None:
+        self.token.undeclare()
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    overrides = {
+        "gains": {"k_s": args.k_s, "k_phi": args.k_phi, "k_v": args.k_v, "cycle_s": args.cycle_s},
+        "patrol": {"passes_per_sweep": args.passes},
+    }
+    try:
+        gains, patrol, limits = agent_config.load(args.config, overrides)
+    except agent_config.ConfigError as exc:
+        print(f"btrack agent: {exc}", file=sys.stderr)
+        return 2
+    if not 0 <= args.id < args.robots:
+        print(f"btrack agent: --id {args.id} outside a team of {args.robots}", file=sys.stderr)
+        return 2
+    problems = check_gains(args.robots, gains.k_phi, gains.k_s, args.max_depth)
+    if problems:
+        print("btrack agent: unstable gains: " + "; ".join(problems), file=sys.stderr)
+        return 2
+    opts = options_from_args(args)
+    with open_session(opts) as session:
+        node = AgentNode(session, Keys(opts.ns), args.id, args.robots, gains, patrol, limits,
+                         args.neighbour_timeout)
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, lambda *_: node.stop())
+        try:
+            node.run()
+        finally:
+            node.close()
+            print(json.dumps({"agent": args.id, "ticks": node.ticks, "dropped": node.dropped}),
+                  flush=True)
+    return 0

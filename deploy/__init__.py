@@ -1,0 +1,1 @@
+"""Starting whole teams: the local launcher (``btrack sim``) and deployment files."""

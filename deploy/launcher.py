@@ -1,0 +1,216 @@
+"""``btrack sim``: a simulated team on this machine, every part its own OS process.
+
+It starts the recorder, N agents and the world (each a subprocess speaking Zenoh
+on loopback under a fresh run namespace), shows progress while the world runs,
+ends every process it started (on finish, on error and on Ctrl-C) and writes the
+report from the recording.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import queue
+import sys
+import threading
+import time
+from pathlib import Path
+
+import zenoh
+
+from agent.stability import check_gains
+from deploy.procs import Child, ProcessGroup, free_port
+from wire import AgentState, DecodeError, Keys, Tick, decode
+from wire.session import SessionOptions, open_session
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="btrack sim", description=__doc__.splitlines()[0])
+    p.add_argument("--robots", type=int, default=3, help="team size (default 3)")
+    p.add_argument("--map", default="half-algae",
+                   help="no-algae | half-algae | random-algae | FILE.png (default half-algae)")
+    p.add_argument("--scale", type=float, default=0.05, help="PNG map metres per pixel")
+    p.add_argument("--start", default="ahead:1",
+                   help="in-phase | ahead:K (robot K starts 72 deg ahead; default ahead:1)")
+    p.add_argument("--localization", choices=["truth", "odometry"], default="truth",
+                   help="where agents' poses come from (default truth)")
+    p.add_argument("--duration", type=float, default=900.0, help="simulated seconds (900)")
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--out", type=Path, help="output directory (default runs/<time>)")
+    p.add_argument("--realtime", action="store_true", help="pace the world on the wall clock")
+    p.add_argument("--config", metavar="FILE.toml", help="agent configuration for every agent")
+    p.add_argument("--k-s", type=float)
+    p.add_argument("--k-phi", type=float)
+    p.add_argument("--k-v", type=float)
+    p.add_argument("--cycle-s", type=float)
+    p.add_argument("--passes", type=int)
+    p.add_argument("--ns", help="run namespace (default: a fresh one per run)")
+    p.add_argument("--no-report", action="store_true", help="skip the report at the end")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    return p
+
+
+def _agent_args(args: argparse.Namespace) -> list[str]:
+    out: list[str] = []
+    for flag in ("config", "k_s", "k_phi", "k_v", "cycle_s", "passes"):
+        value = getattr(args, flag)
+        if value is not None:
+            out += ["--" + flag.replace("_", "-"), str(value)]
+    return out
+
+
+class Monitor:
+    """The launcher's view of the run, for progress lines: last tick, agents' errors."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys):
+        self.events: queue.SimpleQueue[tuple[str, bytes]] = queue.SimpleQueue()
+        self.tick: Tick | None = None
+        self.states: dict[int, AgentState] = {}
+        self.recorder_alive = threading.Event()
+        self._subs = [
+            session.declare_subscriber(
+                keys.world_tick(), lambda s: self.events.put(("tick", s.payload.to_bytes()))),
+            session.declare_subscriber(
+                keys.state("*"), lambda s: self.events.put(("state", s.payload.to_bytes()))),
+            session.liveliness().declare_subscriber(
+                keys.alive_recorder(), self._on_recorder, history=True),
+        ]
+
+    def _on_recorder(self, sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.PUT:
+            self.recorder_alive.set()
+
+    def drain(self) -> None:
+        while True:
+            try:
+                kind, payload = self.events.get_nowait()
+            except queue.Empty:
+                return
+            try:
+                if kind == "tick":
+                    self.tick = decode(Tick, payload)
+                else:
+                    st = decode(AgentState, payload)
+                    self.states[st.robot] = st
+            except DecodeError:
+                pass
+
+    def errors(self) -> tuple[float, float]:
+        """Mean |phase error| and |workload error| over neighbour pairs, as the agents
+        themselves see them (the report measures against truth)."""
+        ids = sorted(self.states)
+        ep, ew = [], []
+        for a, b in zip(ids, ids[1:], strict=False):
+            sa, sb = self.states[a], self.states[b]
+            d = (sb.phase - sa.phase + math.pi) % (2 * math.pi) - math.pi
+            ep.append(abs(d))
+            ew.append(abs(sb.workload - sa.workload))
+        mean = lambda xs: sum(xs) / len(xs) if xs else float("nan")  # noqa: E731
+        return mean(ep), mean(ew)
+
+
+def _fail(group: ProcessGroup, child: Child, what: str) -> int:
+    print(f"\nbtrack sim: {child.name} {what} (exit code {child.proc.returncode}); "
+          f"its log {child.log_path}:\n{child.log_tail()}", file=sys.stderr)
+    group.stop_all()
+    return 1
+
+
+def run(args: argparse.Namespace) -> int:
+    problems = check_gains(args.robots, args.k_phi if args.k_phi is not None else 0.3,
+                           args.k_s if args.k_s is not None else 0.02, 2.0)
+    if problems:
+        print("btrack sim: unstable gains: " + "; ".join(problems), file=sys.stderr)
+        return 2
+    out: Path = args.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
+    out.mkdir(parents=True, exist_ok=True)
+    ns = args.ns or f"btrack/sim-{os.getpid()}-{int(time.time() * 1000) % 10**9}"
+    keys = Keys(ns)
+    port = free_port()
+    hub = SessionOptions(ns=ns, mode="peer", listen=(f"tcp/127.0.0.1:{port}",), multicast=False)
+    member = SessionOptions(ns=ns, mode="peer", connect=(f"tcp/127.0.0.1:{port}",),
+                            listen=("tcp/127.0.0.1:0",), multicast=False).to_args()
+    group = ProcessGroup(out / "logs")
+    print(f"btrack sim: {args.robots} robots, map {args.map}, start {args.start}, "
+          f"localization {args.localization}, {args.duration:g} s simulated -> {out}")
+    t_wall0 = time.monotonic()
+    try:
+        with open_session(hub) as session:
+            monitor = Monitor(session, keys)
+            recorder = group.start("recorder", ["record", "--out", str(out), *member])
+            while not monitor.recorder_alive.wait(0.2):
+                if not recorder.alive():
+                    return _fail(group, recorder, "failed to start")
+                if time.monotonic() - t_wall0 > 60:
+                    return _fail(group, recorder, "did not come up within 60 s")
+            agents = [
+                group.start(f"agent{i}", ["agent", "--id", str(i), "--robots", str(args.robots),
+                                          *_agent_args(args), *member])
+                for i in range(args.robots)
+            ]
+            world_args = ["world", "--robots", str(args.robots), "--map", args.map,
+                          "--scale", str(args.scale), "--start", args.start,
+                          "--localization", args.localization, "--duration", str(args.duration),
+                          "--seed", str(args.seed), "--wait-recorder", *member]
+            if args.realtime:
+                world_args.append("--realtime")
+            world = group.start("world", world_args)
+            code = _watch(args, group, monitor, world, agents, recorder)
+            if code:
+                return code
+            try:
+                recorder.proc.wait(20)
+            except Exception:
+                pass
+            group.stop_all()
+    except KeyboardInterrupt:
+        print("\nbtrack sim: interrupted; stopping every process", file=sys.stderr)
+        group.stop_all()
+        return 130
+    finally:
+        group.stop_all()
+    wall = time.monotonic() - t_wall0
+    print(f"\nbtrack sim: run finished in {wall:.1f} s wall; recording {out / 'run.mcap'}")
+    if args.no_report:
+        return 0
+    from report.cli import make_report
+
+    summary = make_report(out)
+    print(json.dumps(summary, indent=2))
+    print(f"btrack sim: report in {out / 'report.md'}")
+    return 0
+
+
+def _watch(args: argparse.Namespace, group: ProcessGroup, monitor: Monitor, world: Child,
+           agents: list[Child], recorder: Child) -> int:
+    """Show progress until the world ends; fail fast if a process dies."""
+    last_print = time.monotonic()
+    last_t, last_wall = 0.0, time.monotonic()
+    tty = sys.stdout.isatty()
+    while world.alive():
+        try:
+            world.proc.wait(0.5)
+        except Exception:
+            pass
+        for child in (*agents, recorder):
+            if not child.alive():
+                return _fail(group, child, "exited early")
+        monitor.drain()
+        now = time.monotonic()
+        if not args.quiet and monitor.tick and now - last_print >= (1.0 if tty else 5.0):
+            t = monitor.tick.t
+            speed = (t - last_t) / (now - last_wall) if now > last_wall else 0.0
+            ep, ew = monitor.errors()
+            line = (f"t = {t:7.1f} / {args.duration:g} s  {speed:6.1f}x real time  "
+                    f"|e_phi| {ep:.3f} rad  |e_psi| {ew:.3f} m^2  live {monitor.tick.live}")
+            print("\r" + line if tty else line, end="" if tty else "\n", flush=True)
+            last_print, last_t, last_wall = now, t, now
+    if world.proc.returncode != 0:
+        return _fail(group, world, "failed")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run(build_parser().parse_args(argv))

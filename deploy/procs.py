@@ -1,0 +1,93 @@
+"""Child processes of a launcher: started with subprocess (never forked after a
+Zenoh session opened), in their own process group, logged to files, and always
+ended by their own process id."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+
+def free_port() -> int:
+    """A TCP port on loopback that was free a moment ago."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@dataclass
+class Child:
+    name: str
+    proc: subprocess.Popen[bytes]
+    log_path: Path
+    stdout_path: Path
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def log_tail(self, lines: int = 15) -> str:
+        try:
+            return "\n".join(self.log_path.read_text(errors="replace").splitlines()[-lines:])
+        except OSError:
+            return ""
+
+
+@dataclass
+class ProcessGroup:
+    """All processes a launcher started; ``stop_all`` ends every one of them."""
+
+    log_dir: Path
+    children: list[Child] = field(default_factory=list)
+
+    def start(self, name: str, args: list[str]) -> Child:
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        log_path = self.log_dir / f"{name}.log"
+        out_path = self.log_dir / f"{name}.out"
+        with open(log_path, "wb") as err, open(out_path, "wb") as out:
+            proc = subprocess.Popen(
+                [sys.executable, "-m", "btrack", *args],
+                stdin=subprocess.DEVNULL, stdout=out, stderr=err,
+                start_new_session=True,  # Ctrl-C reaches the launcher only; it ends them
+                env={**os.environ, "PYTHONUNBUFFERED": "1"},
+            )
+        child = Child(name, proc, log_path, out_path)
+        self.children.append(child)
+        return child
+
+    def stop(self, child: Child, grace_s: float = 5.0) -> int | None:
+        if child.alive():
+            try:
+                os.kill(child.pid, signal.SIGTERM)
+            except ProcessLookupError:
+                pass
+            try:
+                child.proc.wait(grace_s)
+            except subprocess.TimeoutExpired:
+                os.kill(child.pid, signal.SIGKILL)
+                child.proc.wait()
+        return child.proc.returncode
+
+    def stop_all(self, grace_s: float = 5.0) -> None:
+        for child in self.children:
+            if child.alive():
+                try:
+                    os.kill(child.pid, signal.SIGTERM)
+                except ProcessLookupError:
+                    pass
+        deadline = time.monotonic() + grace_s
+        for child in self.children:
+            try:
+                child.proc.wait(max(0.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                os.kill(child.pid, signal.SIGKILL)
+                child.proc.wait()

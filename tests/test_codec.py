@@ -1,0 +1,73 @@
+"""Wire codec: round trips, and every kind of bad payload refused with a reason."""
+
+import math
+
+import msgpack
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from wire import AgentState, Cmd, DecodeError, Keys, Sense, decode, encode
+
+finite = st.floats(allow_nan=False, allow_infinity=False, min_value=-1e6, max_value=1e6)
+
+
+def state(**kw):
+    base = dict(t=1.0, k=10, robot=1, lo=2.0, hi=4.0, phase=1.0, phase_des=1.1, workload=0.6,
+                depth_avg=0.3, direction=1, lower=0, upper=2, edge_lo=0.0, edge_hi=6.0)
+    base.update(kw)
+    return AgentState(**base)
+
+
+@given(finite, st.integers(0, 10**9), st.integers(0, 1000), st.floats(-10, 10), st.floats(-100, 100))
+def test_cmd_round_trip(t, k, robot, v, omega):
+    msg = Cmd(abs(t), k, robot, v, omega)
+    assert decode(Cmd, encode(msg)) == msg
+
+
+def test_state_round_trip():
+    assert decode(AgentState, encode(state())) == state()
+
+
+def test_ints_accepted_for_floats():
+    raw = msgpack.packb({**state().__dict__, "lo": 2})
+    assert decode(AgentState, raw).lo == 2.0
+
+
+@pytest.mark.parametrize(
+    "payload, reason",
+    [
+        (b"\xc1garbage", "not msgpack"),
+        (msgpack.packb([1, 2, 3]), "expected a map"),
+        (msgpack.packb({**state().__dict__, "phase": float("nan")}), "not finite"),
+        (msgpack.packb({**state().__dict__, "workload": math.inf}), "not finite"),
+        (msgpack.packb({**state().__dict__, "phase": 7.0}), "phase outside"),
+        (msgpack.packb({**state().__dict__, "hi": 9.0}), "boundaries outside"),
+        (msgpack.packb({**state().__dict__, "lo": "x"}), "expected a number"),
+        (msgpack.packb({**state().__dict__, "direction": 0}), "direction"),
+        (msgpack.packb({k: v for k, v in state().__dict__.items() if k != "phase"}), "missing"),
+        (msgpack.packb({**state().__dict__, "evil": 1}), "unknown field"),
+        (msgpack.packb({**state().__dict__, "k": True}), "expected an integer"),
+    ],
+)
+def test_bad_payloads_refused_with_reason(payload, reason):
+    with pytest.raises(DecodeError, match=reason):
+        decode(AgentState, payload)
+
+
+@given(st.binary(max_size=200))
+def test_random_bytes_never_raise_anything_else(data):
+    try:
+        decode(Sense, data)
+    except DecodeError:
+        pass
+
+
+def test_keys_namespace_and_robot_of():
+    keys = Keys("btrack/run-1")
+    assert keys.state(3) == "btrack/run-1/agent/3/state"
+    assert Keys.robot_of(keys.cmd(12)) == 12
+    assert Keys.robot_of(keys.alive(4)) == 4
+    assert keys.relative(keys.sense(0)) == "robot/0/sense"
+    with pytest.raises(ValueError):
+        Keys("bad ns*")
