@@ -4,6 +4,7 @@ ended by their own process id."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import socket
@@ -62,6 +63,10 @@ class ProcessGroup:
             )
         child = Child(name, proc, log_path, out_path)
         self.children.append(child)
+        # So that whoever started the launcher can end every child by pid, whatever happens.
+        (self.log_dir / "pids.json").write_text(
+            json.dumps({c.name: c.pid for c in self.children}, indent=1)
+        )
         return child
 
     def stop(self, child: Child, grace_s: float = 5.0) -> int | None:

@@ -1,0 +1,100 @@
+"""Helpers for process tests: a private namespace and loopback port per test, a test
+session with multicast off, and ending every process by its own pid."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+import uuid
+from collections.abc import Callable
+from pathlib import Path
+
+import zenoh
+
+from deploy.procs import free_port
+from wire.session import SessionOptions, open_session
+
+
+def unique_ns() -> str:
+    return f"btrack/test-{uuid.uuid4().hex[:12]}"
+
+
+def hub_session(ns: str, port: int) -> zenoh.Session:
+    return open_session(SessionOptions(ns=ns, mode="peer", listen=(f"tcp/127.0.0.1:{port}",),
+                                       multicast=False))
+
+
+def member_args(ns: str, port: int) -> list[str]:
+    return ["--ns", ns, "--mode", "peer", "--connect", f"tcp/127.0.0.1:{port}",
+            "--listen", "tcp/127.0.0.1:0", "--no-multicast"]
+
+
+def start(args: list[str], log: Path | None = None) -> subprocess.Popen[bytes]:
+    err = open(log, "wb") if log else subprocess.DEVNULL  # noqa: SIM115
+    return subprocess.Popen([sys.executable, "-m", "btrack", *args], stdin=subprocess.DEVNULL,
+                            stdout=subprocess.PIPE, stderr=err, start_new_session=True)
+
+
+def end(proc: subprocess.Popen[bytes], grace_s: float = 5.0) -> None:
+    """End a process we started, by its pid: SIGTERM, then SIGKILL."""
+    kill_pid(proc.pid, grace_s, proc)
+
+
+def kill_pid(pid: int, grace_s: float = 5.0, proc: subprocess.Popen[bytes] | None = None) -> None:
+    try:
+        os.kill(pid, signal.SIGTERM)
+    except ProcessLookupError:
+        return
+    deadline = time.monotonic() + grace_s
+    while time.monotonic() < deadline:
+        if proc is not None:
+            if proc.poll() is not None:
+                return
+        elif not pid_alive(pid):
+            return
+        time.sleep(0.05)
+    try:
+        os.kill(pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    if proc is not None:
+        proc.wait()
+
+
+def pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    # a zombie of someone else's is dead for our purpose
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z"
+    except OSError:
+        return False
+
+
+def end_children_of_run(out: Path) -> list[int]:
+    """End every process a launcher recorded in OUT/logs/pids.json; returns the pids."""
+    path = out / "logs" / "pids.json"
+    if not path.exists():
+        return []
+    pids = list(json.loads(path.read_text()).values())
+    for pid in pids:
+        kill_pid(pid)
+    return pids
+
+
+def wait_for(cond: Callable[[], bool], timeout: float, what: str) -> None:
+    deadline = time.monotonic() + timeout
+    while not cond():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+        time.sleep(0.02)
+
+
+__all__ = ["end", "end_children_of_run", "free_port", "hub_session", "kill_pid", "member_args",
+           "pid_alive", "start", "unique_ns", "wait_for"]

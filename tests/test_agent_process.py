@@ -1,0 +1,110 @@
+"""The agent as a real process on a private Zenoh namespace: it answers its robot,
+follows its neighbours, and survives garbage and out-of-range values on a
+neighbour's key (counted and dropped)."""
+
+from __future__ import annotations
+
+import math
+import queue
+
+import msgpack
+import pytest
+import zenoh
+
+from tests.procutil import end, free_port, hub_session, member_args, start, unique_ns
+from wire import AgentState, Cmd, Keys, Pose, Sense, decode, encode
+from wire.codec import MSGPACK
+
+
+@pytest.fixture
+def bus():
+    ns, port = unique_ns(), free_port()
+    with hub_session(ns, port) as session:
+        yield ns, port, session
+
+
+def neighbour_state(robot: int, k: int, lo: float, hi: float) -> AgentState:
+    return AgentState(t=k * 0.1, k=k, robot=robot, lo=lo, hi=hi, phase=0.1, phase_des=0.1,
+                      workload=0.6, depth_avg=0.3, direction=1, lower=-1 if robot == 0 else 1,
+                      upper=-1 if robot == 2 else 1, edge_lo=0.0, edge_hi=6.0)
+
+
+def test_agent_survives_garbage_and_counts_it(bus, tmp_path):
+    ns, port, session = bus
+    keys = Keys(ns)
+    states: queue.SimpleQueue[AgentState] = queue.SimpleQueue()
+    cmds: queue.SimpleQueue[Cmd] = queue.SimpleQueue()
+    session.declare_subscriber(keys.state(1), lambda s: states.put(decode(AgentState, s.payload.to_bytes())))
+    session.declare_subscriber(keys.cmd(1), lambda s: cmds.put(decode(Cmd, s.payload.to_bytes())))
+    alive: queue.SimpleQueue[str] = queue.SimpleQueue()
+    session.liveliness().declare_subscriber(keys.alive(1), lambda s: alive.put(str(s.kind)))
+    # The test plays both neighbours (ids 0 and 2) and the world.
+    tokens = [session.liveliness().declare_token(keys.alive(i)) for i in (0, 2)]
+    enc = zenoh.Encoding(MSGPACK)
+    pub0 = session.declare_publisher(keys.state(0), encoding=enc)
+    pub2 = session.declare_publisher(keys.state(2), encoding=enc)
+    proc = start(["agent", "--id", "1", "--robots", "3", "--neighbour-timeout", "0.3",
+                  *member_args(ns, port)], tmp_path / "agent.log")
+    try:
+        alive.get(timeout=30)
+
+        def tick(k: int) -> tuple[Cmd, AgentState]:
+            pub0.put(encode(neighbour_state(0, k - 1, 0.0, 2.0)))
+            pub2.put(encode(neighbour_state(2, k - 1, 4.0, 6.0)))
+            session.put(keys.sense(1), encode(Sense(k * 0.1, k, 1, False, False, 0.0, 0.0,
+                                                    0.0, 6.0, 0.1)))
+            session.put(keys.pose(1), encode(Pose(k * 0.1, k, 1, 2.05, -1.0, math.pi / 2)))
+            cmd = cmds.get(timeout=10)
+            state = states.get(timeout=10)
+            assert cmd.k == k and state.k == k
+            return cmd, state
+
+        for k in range(3):
+            _, state = tick(k)
+        assert state.dropped == 0
+        assert state.lower == 0 and state.upper == 2
+        assert 1.5 < state.lo < state.hi < 4.5
+
+        bad = [
+            b"\x00\xff garbage",
+            msgpack.packb({"t": 1.0}),  # missing fields
+            msgpack.packb({**neighbour_state(0, 3, 0.0, 2.0).__dict__, "phase": float("nan")}),
+            msgpack.packb({**neighbour_state(0, 3, 0.0, 2.0).__dict__, "hi": 99.0}),  # off edge
+            msgpack.packb({**neighbour_state(0, 3, 0.0, 2.0).__dict__, "phase_des": 9.0}),
+            encode(neighbour_state(2, 3, 4.0, 6.0)),  # robot 2's state on robot 0's key
+        ]
+        for payload in bad:
+            pub0.put(payload)
+        for k in range(3, 6):
+            cmd, state = tick(k)
+        assert proc.poll() is None, "the agent died"
+        assert state.dropped == len(bad)
+        assert math.isfinite(cmd.v) and math.isfinite(cmd.omega)
+        assert 0.0 <= state.phase < 2 * math.pi and state.lo < state.hi
+    finally:
+        end(proc)
+        for tok in tokens:
+            tok.undeclare()
+    assert proc.returncode == 0, (tmp_path / "agent.log").read_text()
+
+
+def test_agent_refuses_unstable_gains(tmp_path):
+    proc = start(["agent", "--id", "0", "--robots", "3", "--k-phi", "0.7",
+                  "--ns", unique_ns(), "--no-multicast"], tmp_path / "a.log")
+    try:
+        assert proc.wait(30) == 2
+    finally:
+        end(proc)
+    assert "K_phi" in (tmp_path / "a.log").read_text()
+
+
+def test_agent_refuses_bad_config_file(tmp_path):
+    conf = tmp_path / "agent.toml"
+    conf.write_text("[gains]\nk_phi = 0.2\nk_bogus = 1\n")
+    proc = start(["agent", "--id", "0", "--robots", "3", "--config", str(conf),
+                  "--ns", unique_ns(), "--no-multicast"], tmp_path / "a.log")
+    try:
+        assert proc.wait(30) == 2
+    finally:
+        end(proc)
+    assert "k_bogus" in (tmp_path / "a.log").read_text()
