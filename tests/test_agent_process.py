@@ -34,7 +34,9 @@ def test_agent_survives_garbage_and_counts_it(bus, tmp_path):
     keys = Keys(ns)
     states: queue.SimpleQueue[AgentState] = queue.SimpleQueue()
     cmds: queue.SimpleQueue[Cmd] = queue.SimpleQueue()
-    session.declare_subscriber(keys.state(1), lambda s: states.put(decode(AgentState, s.payload.to_bytes())))
+    session.declare_subscriber(
+        keys.state(1), lambda s: states.put(decode(AgentState, s.payload.to_bytes()))
+    )
     session.declare_subscriber(keys.cmd(1), lambda s: cmds.put(decode(Cmd, s.payload.to_bytes())))
     alive: queue.SimpleQueue[str] = queue.SimpleQueue()
     session.liveliness().declare_subscriber(keys.alive(1), lambda s: alive.put(str(s.kind)))
