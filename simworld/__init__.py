@@ -1,0 +1,1 @@
+"""The simulated world: maps, kinematics, sensors, and the lockstep clock process."""

@@ -1,0 +1,373 @@
+"""``btrack world``: the simulator process, the run's clock (DESIGN.md "Time").
+
+Lockstep (default): tick k publishes every robot's Truth, Pose and Sense (Sense last),
+waits for tick k's Cmd from every live agent (a dead agent is not waited for, a silent
+one at most ``--cmd-timeout``), publishes the Tick and steps the world. ``--realtime``
+paces ticks on the wall clock instead and uses each robot's latest command.
+Membership is Zenoh liveliness on ``keys.alive('*')``. Zenoh callbacks only push into
+a queue; everything else happens on the main thread.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import logging
+import os
+import queue
+import signal
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import zenoh
+
+from simworld.maps import MapError, load_map
+from simworld.world import World, parse_start
+from wire import Cmd, DecodeError, Keys, Pose, Sense, Tick, Truth, WorldInfo, decode, encode
+from wire.session import SessionOptions, add_session_args, open_session, options_from_args
+
+log = logging.getLogger("btrack.world")
+
+INFO_EVERY_TICKS = 100
+CLOSE_TIMEOUT_S = 3.0
+MSGPACK = zenoh.Encoding("application/msgpack")
+
+# queue items, built on Zenoh threads: (kind, key, payload-or-flag)
+_ALIVE, _RECORDER, _CMD, _STOP = "alive", "recorder", "cmd", "stop"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="btrack world", description="The simulator: maps, kinematics, sensors, the clock."
+    )
+    p.add_argument("--robots", type=int, default=3, help="number of robots (default 3)")
+    p.add_argument(
+        "--map",
+        default="half-algae",
+        help="no-algae | half-algae | random-algae | FILE.png (default half-algae)",
+    )
+    p.add_argument("--scale", type=float, default=0.05, help="PNG metres per pixel (0.05)")
+    p.add_argument("--start", default="in-phase", help="in-phase | ahead:K (default in-phase)")
+    p.add_argument(
+        "--localization",
+        choices=["truth", "odometry"],
+        default="truth",
+        help="what the world publishes as each robot's Pose (default truth)",
+    )
+    p.add_argument("--duration", type=float, default=600.0, help="simulated seconds (600)")
+    p.add_argument("--seed", type=int, default=1, help="seed of the map and the noise (1)")
+    p.add_argument("--dt", type=float, default=0.1, help="control period, s (0.1)")
+    p.add_argument(
+        "--odom-noise",
+        type=float,
+        default=0.02,
+        help="odometry noise, std as a fraction of distance and turn (0.02)",
+    )
+    p.add_argument("--realtime", action="store_true", help="pace ticks on the wall clock")
+    p.add_argument(
+        "--cmd-timeout",
+        type=float,
+        default=2.0,
+        help="wall seconds to wait for a live agent's command (2.0)",
+    )
+    p.add_argument(
+        "--startup-timeout",
+        type=float,
+        default=60.0,
+        help="wall seconds to wait for all agents before tick 0 (60)",
+    )
+    p.add_argument(
+        "--wait-recorder",
+        action="store_true",
+        help="also wait for the recorder's liveliness token before tick 0",
+    )
+    add_session_args(p)
+    return p
+
+
+@contextlib.contextmanager
+def bounded_session(opts: SessionOptions) -> Iterator[zenoh.Session]:
+    """A session closed on exit, without letting a slow close hang the process."""
+    session = open_session(opts)
+    try:
+        yield session
+    finally:
+        closer = threading.Thread(target=session.close, daemon=True)
+        closer.start()
+        closer.join(CLOSE_TIMEOUT_S)
+        if closer.is_alive():
+            log.warning("session close took over %.0f s; exiting anyway", CLOSE_TIMEOUT_S)
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(0)
+
+
+class WorldProcess:
+    """The shell around a ``World``: publishers, the event queue and the tick loop."""
+
+    def __init__(self, args: argparse.Namespace, world: World, session: zenoh.Session) -> None:
+        self.args = args
+        self.world = world
+        self.n = world.n
+        self.dt = float(args.dt)
+        self.keys = Keys(args.ns)
+        self.events: queue.SimpleQueue[tuple[str, str, Any]] = queue.SimpleQueue()
+        self.live: set[int] = set()
+        self.recorder_alive = False
+        self.dropped = 0
+        self.timeouts = 0
+        self.stopping = False
+        self.edge_lo, self.edge_hi = world.map.edge_lo, world.map.edge_hi
+        self.pose_source = args.localization
+        k = self.keys
+
+        def pub(key: str) -> zenoh.Publisher:
+            return session.declare_publisher(key, encoding=MSGPACK, express=True)
+
+        self.pub_truth = [pub(k.truth(i)) for i in range(self.n)]
+        self.pub_pose = [pub(k.pose(i)) for i in range(self.n)]
+        self.pub_sense = [pub(k.sense(i)) for i in range(self.n)]
+        self.pub_tick = pub(k.world_tick())
+        self.pub_info = pub(k.world_info())
+        put = self.events.put
+        self._subs = [
+            session.declare_subscriber(
+                k.cmd("*"), lambda s: put((_CMD, str(s.key_expr), s.payload.to_bytes()))
+            ),
+            session.liveliness().declare_subscriber(
+                k.alive("*"),
+                lambda s: put((_ALIVE, str(s.key_expr), s.kind == zenoh.SampleKind.PUT)),
+                history=True,
+            ),
+            session.liveliness().declare_subscriber(
+                k.alive_recorder(),
+                lambda s: put((_RECORDER, str(s.key_expr), s.kind == zenoh.SampleKind.PUT)),
+                history=True,
+            ),
+        ]
+
+    # events ------------------------------------------------------------------
+    def stop(self) -> None:
+        """Called from a signal handler: wake the loop and end the run."""
+        self.stopping = True
+        self.events.put((_STOP, "", None))
+
+    def _handle(self, item: tuple[str, str, Any]) -> Cmd | None:
+        """Apply a membership event; return a valid Cmd, or None."""
+        kind, key, value = item
+        if kind == _CMD:
+            try:
+                cmd = decode(Cmd, value)
+            except DecodeError as exc:
+                self._drop(key, str(exc))
+                return None
+            if cmd.robot != Keys.robot_of(key) or not 0 <= cmd.robot < self.n:
+                self._drop(key, f"robot {cmd.robot} on this key")
+                return None
+            return cmd
+        if kind == _ALIVE:
+            robot = Keys.robot_of(key)
+            if robot is not None and 0 <= robot < self.n:
+                if value:
+                    self.live.add(robot)
+                else:
+                    self.live.discard(robot)
+                log.info("agent %d %s", robot, "alive" if value else "gone")
+        elif kind == _RECORDER:
+            self.recorder_alive = bool(value)
+        return None
+
+    def _drop(self, key: str, why: str) -> None:
+        self.dropped += 1
+        if self.dropped <= 10:
+            log.warning("dropped a command on %s: %s", key, why)
+
+    # publishing --------------------------------------------------------------
+    def publish_info(self) -> None:
+        a = self.args
+        info = WorldInfo(
+            map=a.map,
+            start=a.start,
+            robots=self.n,
+            localization=a.localization,
+            seed=a.seed,
+            duration_s=a.duration,
+            dt=self.dt,
+            realtime=bool(a.realtime),
+            **self.world.info(),  # type: ignore[arg-type]
+        )
+        self.pub_info.put(encode(info))
+
+    def publish_sensing(self, k: int, t: float) -> None:
+        world, dt, lo, hi = self.world, self.dt, self.edge_lo, self.edge_hi
+        odometry = self.pose_source == "odometry"
+        for i in range(self.n):
+            x, y, th = world.truth(i)
+            self.pub_truth[i].put(encode(Truth(t, k, i, x, y, th)))
+            if odometry:
+                px, py, pth = world.odometry_pose(i)
+            else:
+                px, py, pth = x, y, th
+            self.pub_pose[i].put(encode(Pose(t, k, i, px, py, pth, source=self.pose_source)))
+            r = world.sense(i)
+            sense = Sense(t, k, i, r.ice, r.algae, r.odom_dist_m, r.odom_dtheta, lo, hi, dt)
+            self.pub_sense[i].put(encode(sense))  # last: an agent may act on its Sense
+
+    # the clock ---------------------------------------------------------------
+    def wait_for_team(self) -> bool:
+        """Block until all n agents (and the recorder if asked) are alive."""
+        deadline = time.monotonic() + self.args.startup_timeout
+        while not self.stopping:
+            if len(self.live) == self.n and (self.recorder_alive or not self.args.wait_recorder):
+                return True
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                break
+            try:
+                self._handle(self.events.get(timeout=remaining))
+            except queue.Empty:
+                break
+        if not self.stopping:
+            missing = sorted(set(range(self.n)) - self.live)
+            what = f"agents {missing}" if missing else "the recorder"
+            print(
+                f"btrack world: {what} not alive after {self.args.startup_timeout:g} s",
+                file=sys.stderr,
+            )
+        return False
+
+    def run_lockstep(self, total: int) -> int:
+        events, timeout, world, dt = self.events, self.args.cmd_timeout, self.world, self.dt
+        k = 0
+        while k < total and not self.stopping:
+            t = k * dt
+            if k and k % INFO_EVERY_TICKS == 0:
+                self.publish_info()
+            self.publish_sensing(k, t)
+            pending = set(self.live)
+            cmds: dict[int, tuple[float, float]] = {}
+            began = time.monotonic()
+            deadline = began + timeout
+            while pending and not self.stopping:
+                remaining = deadline - time.monotonic()
+                try:
+                    item = events.get(timeout=remaining) if remaining > 0 else events.get_nowait()
+                except queue.Empty:
+                    self.timeouts += len(pending)
+                    log.warning(
+                        "tick %d: no command from %s in %.1f s", k, sorted(pending), timeout
+                    )
+                    break
+                cmd = self._handle(item)
+                if cmd is not None and cmd.k == k:
+                    cmds[cmd.robot] = (cmd.v, cmd.omega)
+                    pending.discard(cmd.robot)
+                elif item[0] == _ALIVE:
+                    pending &= self.live  # an agent that left is not waited for
+            if self.stopping:
+                break
+            waited_ms = (time.monotonic() - began) * 1000.0
+            live = sorted(self.live)
+            self.pub_tick.put(encode(Tick(t, k, live, waited_ms, k == total - 1)))
+            world.step({i: c for i, c in cmds.items() if i in self.live}, dt)
+            k += 1
+        return k
+
+    def run_realtime(self, total: int) -> int:
+        events, world, dt = self.events, self.world, self.dt
+        latest: dict[int, tuple[float, float, float]] = {}  # robot -> v, omega, wall time
+        start = time.monotonic()
+        k = 0
+        while k < total and not self.stopping:
+            t = k * dt
+            if k and k % INFO_EVERY_TICKS == 0:
+                self.publish_info()
+            self.publish_sensing(k, t)
+            began = time.monotonic()
+            deadline = start + (k + 1) * dt
+            while not self.stopping:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    break
+                try:
+                    cmd = self._handle(events.get(timeout=remaining))
+                except queue.Empty:
+                    break
+                if cmd is not None:
+                    latest[cmd.robot] = (cmd.v, cmd.omega, time.monotonic())
+            if self.stopping:
+                break
+            now = time.monotonic()
+            cmds = {
+                i: (v, w)
+                for i, (v, w, seen) in latest.items()
+                if i in self.live and now - seen <= self.args.cmd_timeout
+            }
+            waited_ms = (now - began) * 1000.0
+            self.pub_tick.put(encode(Tick(t, k, sorted(self.live), waited_ms, k == total - 1)))
+            world.step(cmds, dt)
+            k += 1
+        return k
+
+
+def _check_args(args: argparse.Namespace) -> str | None:
+    if args.robots < 1:
+        return "--robots must be at least 1"
+    if not args.dt > 0 or not args.duration > 0:
+        return "--dt and --duration must be positive"
+    if args.odom_noise < 0 or args.cmd_timeout < 0 or args.startup_timeout < 0:
+        return "--odom-noise, --cmd-timeout and --startup-timeout must be >= 0"
+    try:
+        parse_start(args.start, args.robots)
+    except ValueError as exc:
+        return str(exc)
+    return None
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.WARNING, format="btrack world: %(message)s")
+    problem = _check_args(args)
+    if problem:
+        print(f"btrack world: {problem}", file=sys.stderr)
+        return 2
+    try:
+        gmap = load_map(args.map, args.scale, args.seed)
+        gmap.check_room()
+    except MapError as exc:
+        print(f"btrack world: {exc}", file=sys.stderr)
+        return 2
+    world = World(gmap, args.robots, args.start, args.seed, args.odom_noise)
+    total = round(args.duration / args.dt)
+
+    with bounded_session(options_from_args(args)) as session:
+        proc = WorldProcess(args, world, session)
+        previous = {
+            sig: signal.signal(sig, lambda *_: proc.stop())
+            for sig in (signal.SIGTERM, signal.SIGINT)
+        }
+        try:
+            if not proc.wait_for_team():
+                return 0 if proc.stopping else 1
+            proc.publish_info()
+            began = time.monotonic()
+            run = proc.run_realtime if args.realtime else proc.run_lockstep
+            ticks = run(total)
+            wall = time.monotonic() - began
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+        summary = {
+            "ticks": ticks,
+            "wall_s": round(wall, 3),
+            "speedup": round(ticks * args.dt / wall, 1) if wall > 0 else None,
+            "dropped": proc.dropped,
+            "timeouts": proc.timeouts,
+            "interrupted": proc.stopping,
+        }
+        print(json.dumps(summary), flush=True)
+    return 0

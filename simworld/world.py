@@ -1,0 +1,145 @@
+"""The simulated world (pure): robots on a map, their sensors, odometry and stepping.
+
+No I/O, no clock: the process shell calls ``sense``/``truth``/``odometry_pose`` for
+tick k, then ``step`` with the commands and ``dt``. Odometry noise comes from a seeded
+numpy Generator, so the same seed and the same commands give the same run.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from simworld.kinematics import integrate_arc, limit_wheels, wrap_angle
+from simworld.maps import MIN_DEPTH_M, ROBOT_ROOM_M, GridMap
+
+ROBOT_RADIUS_M = 0.17
+MARGIN_OUT_M = 0.3  # the patrol goes this far back out past the edge before turning
+START_INSIDE_M = 0.05  # phase-0 robots start a hair inside their segment
+AHEAD_PHASE = 2.0 * math.pi / 5.0
+
+
+@dataclass(frozen=True)
+class Reading:
+    """What robot i's own sensors report at the current tick."""
+
+    ice: bool
+    algae: bool
+    odom_dist_m: float  # distance driven during the previous step, from odometry
+    odom_dtheta: float  # heading change during the previous step, from odometry
+
+
+def parse_start(start: str, n: int) -> int | None:
+    """The robot started ahead for ``ahead:K``, None for ``in-phase``; ValueError else."""
+    if start == "in-phase":
+        return None
+    if start.startswith("ahead:"):
+        try:
+            k = int(start.removeprefix("ahead:"))
+        except ValueError:
+            k = -1
+        if 0 <= k < n:
+            return k
+        raise ValueError(f"bad start {start!r}: K in ahead:K must be a robot id 0..{n - 1}")
+    raise ValueError(f"bad start {start!r}: use in-phase or ahead:K")
+
+
+def start_poses(gmap: GridMap, n: int, start: str) -> list[tuple[float, float, float]]:
+    """Start poses (DESIGN.md): equal initial segments of [edge_lo, edge_hi], 1 m below
+    the lowest edge, heading +y; phase 0 a hair inside the segment, or phase 2 pi / 5
+    (0.4 of the segment into the round trip) for the robot started ahead."""
+    ahead = parse_start(start, n)
+    lo, hi = gmap.edge_lo, gmap.edge_hi
+    seg = (hi - lo) / n
+    y = -ROBOT_ROOM_M  # y = 0 is the lowest edge
+    poses = []
+    for i in range(n):
+        s_i = lo + i * seg
+        frac = AHEAD_PHASE / (2.0 * math.pi) * 2.0  # a round trip is twice the segment
+        x = s_i + frac * seg if i == ahead else s_i + min(START_INSIDE_M, 0.5 * seg)
+        poses.append((x, y, math.pi / 2.0))
+    return poses
+
+
+class World:
+    """n differential-drive robots on a ``GridMap``."""
+
+    def __init__(
+        self,
+        gmap: GridMap,
+        n: int,
+        start: str = "in-phase",
+        seed: int = 1,
+        odom_noise: float = 0.02,
+    ) -> None:
+        if n < 1:
+            raise ValueError("need at least one robot")
+        if odom_noise < 0:
+            raise ValueError("odometry noise must be >= 0")
+        self.map = gmap
+        self.n = n
+        self.start = start
+        self.odom_noise = odom_noise
+        self._rng = np.random.default_rng(seed)
+        poses = start_poses(gmap, n, start)
+        self._x = [p[0] for p in poses]
+        self._y = [p[1] for p in poses]
+        self._th = [p[2] for p in poses]
+        self._ox, self._oy, self._oth = list(self._x), list(self._y), list(self._th)
+        self._odom_d = [0.0] * n
+        self._odom_dth = [0.0] * n
+        self.t = 0.0
+        self.k = 0
+
+    def truth(self, i: int) -> tuple[float, float, float]:
+        return self._x[i], self._y[i], self._th[i]
+
+    def odometry_pose(self, i: int) -> tuple[float, float, float]:
+        """Dead-reckoned pose from the noisy odometry, from the true start pose."""
+        return self._ox[i], self._oy[i], self._oth[i]
+
+    def sense(self, i: int) -> Reading:
+        x, y = self._x[i], self._y[i]
+        return Reading(
+            ice=self.map.ice_at(x, y),
+            algae=self.map.algae_at(x, y),
+            odom_dist_m=self._odom_d[i],
+            odom_dtheta=self._odom_dth[i],
+        )
+
+    def step(self, cmds: dict[int, tuple[float, float]], dt: float) -> None:
+        """Drive every robot for ``dt`` at its command (zero if it has none)."""
+        noise = self.odom_noise
+        draws = self._rng.standard_normal(2 * self.n).tolist()
+        for i in range(self.n):
+            v, omega = cmds.get(i, (0.0, 0.0))
+            v, omega = limit_wheels(v, omega)
+            dist, dtheta = v * dt, omega * dt
+            self._x[i], self._y[i], self._th[i] = integrate_arc(
+                self._x[i], self._y[i], self._th[i], dist, dtheta
+            )
+            odist = dist + noise * abs(dist) * draws[2 * i]
+            odth = dtheta + noise * abs(dtheta) * draws[2 * i + 1]
+            self._odom_d[i], self._odom_dth[i] = odist, odth
+            self._ox[i], self._oy[i], self._oth[i] = integrate_arc(
+                self._ox[i], self._oy[i], self._oth[i], odist, odth
+            )
+        self.k += 1
+        self.t = self.k * dt
+
+    def info(self, bin_m: float = 0.1) -> dict[str, object]:
+        """The world's part of wire.WorldInfo (edge, depths, geometry)."""
+        return {
+            "edge_lo": self.map.edge_lo,
+            "edge_hi": self.map.edge_hi,
+            "bin_m": bin_m,
+            "patrol_depth": self.map.patrol_depth_bins(bin_m),
+            "robot_radius": ROBOT_RADIUS_M,
+            "min_depth": MIN_DEPTH_M,
+            "margin_out": MARGIN_OUT_M,
+        }
+
+
+__all__ = ["ROBOT_RADIUS_M", "Reading", "World", "parse_start", "start_poses", "wrap_angle"]
