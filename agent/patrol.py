@@ -117,14 +117,19 @@ class Patrol:
 
     def _start_turn(self, lo: float, hi: float, heading_in: bool) -> None:
         """Choose the direction along the edge, then the arc that moves one pass."""
+        c = self.config
         step = self.spacing(lo, hi)
         if not lo <= self.line_x <= hi:
             # The segment moved away from under the robot: head back at the widest pass.
             self.direction = 1 if self.line_x < lo else -1
-            step = 2 * self.config.max_turn_radius_m
+            step = 2 * c.max_turn_radius_m
         else:
             nxt = self.line_x + self.direction * step
-            if nxt > hi or nxt < lo:
+            end = hi if self.direction > 0 else lo
+            room = abs(end - self.line_x)
+            if (nxt > hi or nxt < lo) and room >= max(0.25 * step, 2 * c.min_turn_radius_m):
+                step = room  # a short last pass, so the sweep reaches the segment's end
+            elif nxt > hi or nxt < lo:
                 self.direction = -self.direction
                 back = self.line_x + self.direction * step
                 if back > hi or back < lo:  # narrower than a pass: head for the middle

@@ -12,7 +12,6 @@ import argparse
 import json
 import math
 import os
-import queue
 import sys
 import threading
 import time
@@ -65,15 +64,14 @@ class Monitor:
     """The launcher's view of the run, for progress lines: last tick, agents' errors."""
 
     def __init__(self, session: zenoh.Session, keys: Keys):
-        self.events: queue.SimpleQueue[tuple[str, bytes]] = queue.SimpleQueue()
+        # Callbacks only keep the latest payload per key: decoding waits for a progress line.
+        self.latest: dict[str, zenoh.ZBytes] = {}
         self.tick: Tick | None = None
         self.states: dict[int, AgentState] = {}
         self.recorder_alive = threading.Event()
         self._subs = [
-            session.declare_subscriber(
-                keys.world_tick(), lambda s: self.events.put(("tick", s.payload.to_bytes()))),
-            session.declare_subscriber(
-                keys.state("*"), lambda s: self.events.put(("state", s.payload.to_bytes()))),
+            session.declare_subscriber(keys.world_tick(), self._keep),
+            session.declare_subscriber(keys.state("*"), self._keep),
             session.liveliness().declare_subscriber(
                 keys.alive_recorder(), self._on_recorder, history=True),
         ]
@@ -82,17 +80,16 @@ class Monitor:
         if sample.kind == zenoh.SampleKind.PUT:
             self.recorder_alive.set()
 
+    def _keep(self, sample: zenoh.Sample) -> None:
+        self.latest[str(sample.key_expr)] = sample.payload
+
     def drain(self) -> None:
-        while True:
+        for key, payload in list(self.latest.items()):
             try:
-                kind, payload = self.events.get_nowait()
-            except queue.Empty:
-                return
-            try:
-                if kind == "tick":
-                    self.tick = decode(Tick, payload)
+                if key.endswith("/world/tick"):
+                    self.tick = decode(Tick, payload.to_bytes())
                 else:
-                    st = decode(AgentState, payload)
+                    st = decode(AgentState, payload.to_bytes())
                     self.states[st.robot] = st
             except DecodeError:
                 pass

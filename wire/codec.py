@@ -26,9 +26,14 @@ class DecodeError(ValueError):
     """A payload that is not a valid message of the expected type."""
 
 
+@cache
+def _names(cls: type) -> tuple[str, ...]:
+    return tuple(f.name for f in dataclasses.fields(cls))
+
+
 def encode(msg: Any) -> bytes:
     """The msgpack bytes of a message dataclass (a map of field name to value)."""
-    return msgpack.packb(dataclasses.asdict(msg), use_bin_type=True)
+    return msgpack.packb({n: getattr(msg, n) for n in _names(type(msg))}, use_bin_type=True)
 
 
 @cache
@@ -47,6 +52,10 @@ def _required(cls: type) -> frozenset[str]:
 
 
 def _coerce(name: str, value: Any, hint: Any) -> Any:
+    if hint is float and type(value) is float:  # the common case, checked cheaply
+        if value - value != 0.0:  # NaN or infinity
+            raise DecodeError(f"{name}: not finite ({value})")
+        return value
     if hint is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise DecodeError(f"{name}: expected a number, got {type(value).__name__}")
