@@ -27,23 +27,24 @@ class DecodeError(ValueError):
 
 
 @cache
-def _names(cls: type) -> tuple[str, ...]:
+def _names(cls: Any) -> tuple[str, ...]:
     return tuple(f.name for f in dataclasses.fields(cls))
 
 
 def encode(msg: Any) -> bytes:
     """The msgpack bytes of a message dataclass (a map of field name to value)."""
-    return msgpack.packb({n: getattr(msg, n) for n in _names(type(msg))}, use_bin_type=True)
+    kind: Any = type(msg)
+    return msgpack.packb({n: getattr(msg, n) for n in _names(kind)}, use_bin_type=True)
 
 
 @cache
-def _field_types(cls: type) -> dict[str, Any]:
+def _field_types(cls: Any) -> dict[str, Any]:
     hints = typing.get_type_hints(cls)
     return {f.name: hints[f.name] for f in dataclasses.fields(cls)}
 
 
 @cache
-def _required(cls: type) -> frozenset[str]:
+def _required(cls: Any) -> frozenset[str]:
     return frozenset(
         f.name
         for f in dataclasses.fields(cls)
@@ -92,8 +93,9 @@ def decode(cls: type[T], payload: bytes) -> T:
         raise DecodeError(f"not msgpack: {exc}") from None
     if not isinstance(raw, dict):
         raise DecodeError(f"expected a map, got {type(raw).__name__}")
-    types = _field_types(cls)
-    missing = _required(cls) - raw.keys()
+    spec: Any = cls  # a dataclass type, hashable for the caches
+    types = _field_types(spec)
+    missing = _required(spec) - raw.keys()
     if missing:
         raise DecodeError(f"missing field(s): {', '.join(sorted(missing))}")
     extra = raw.keys() - types.keys()

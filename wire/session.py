@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import zenoh
@@ -82,9 +82,9 @@ def options_from_args(args: argparse.Namespace) -> SessionOptions:
     )
 
 
-def build_config(opts: SessionOptions, env: dict[str, str] | None = None) -> zenoh.Config:
-    env = os.environ if env is None else env
-    path = opts.config_file or env.get("ZENOH_CONFIG")
+def build_config(opts: SessionOptions, env: Mapping[str, str] | None = None) -> zenoh.Config:
+    environ: Mapping[str, str] = os.environ if env is None else env
+    path = opts.config_file or environ.get("ZENOH_CONFIG")
     if path:
         try:
             conf = zenoh.Config.from_file(path)
@@ -124,6 +124,3 @@ def loopback_options(ns: str, hub_port: int, listen: bool = True) -> SessionOpti
         multicast=False,
     )
 
-
-def endpoints(values: Sequence[str]) -> tuple[str, ...]:
-    return tuple(v for v in values if v)
