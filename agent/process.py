@@ -23,8 +23,7 @@ from agent import config as agent_config
 from agent.controller import Controller, Neighbour, initial_segment
 from agent.stability import check_gains
 from wire import AgentState, Cmd, DecodeError, Keys, Pose, Sense, decode, encode
-from wire.codec import MSGPACK
-from wire.session import add_session_args, open_session, options_from_args
+from wire.session import add_session_args, declare_publisher, open_session, options_from_args
 
 HISTORY = 8  # neighbour states kept per neighbour, by tick
 
@@ -71,9 +70,8 @@ class AgentNode:
         self.ticks = 0
         self.controller: Controller | None = None
         self.stopping = False
-        enc = zenoh.Encoding(MSGPACK)
-        self.pub_state = session.declare_publisher(keys.state(robot), encoding=enc)
-        self.pub_cmd = session.declare_publisher(keys.cmd(robot), encoding=enc)
+        self.pub_state = declare_publisher(session, keys.state(robot))
+        self.pub_cmd = declare_publisher(session, keys.cmd(robot))
         self.subs = [
             session.declare_subscriber(keys.sense(robot), self._on("sense")),
             session.declare_subscriber(keys.pose(robot), self._on("pose")),

@@ -28,13 +28,18 @@ import zenoh
 from simworld.maps import MapError, load_map
 from simworld.world import World, parse_start
 from wire import Cmd, DecodeError, Keys, Pose, Sense, Tick, Truth, WorldInfo, decode, encode
-from wire.session import SessionOptions, add_session_args, open_session, options_from_args
+from wire.session import (
+    SessionOptions,
+    add_session_args,
+    declare_publisher,
+    open_session,
+    options_from_args,
+)
 
 log = logging.getLogger("btrack.world")
 
 INFO_EVERY_TICKS = 100
 CLOSE_TIMEOUT_S = 3.0
-MSGPACK = zenoh.Encoding("application/msgpack")
 
 # queue items, built on Zenoh threads: (kind, key, payload-or-flag)
 _ALIVE, _RECORDER, _CMD, _STOP = "alive", "recorder", "cmd", "stop"
@@ -126,7 +131,7 @@ class WorldProcess:
         k = self.keys
 
         def pub(key: str) -> zenoh.Publisher:
-            return session.declare_publisher(key, encoding=MSGPACK, express=True)
+            return declare_publisher(session, key)
 
         self.pub_truth = [pub(k.truth(i)) for i in range(self.n)]
         self.pub_pose = [pub(k.pose(i)) for i in range(self.n)]

@@ -124,3 +124,16 @@ def loopback_options(ns: str, hub_port: int, listen: bool = True) -> SessionOpti
         multicast=False,
     )
 
+
+
+def declare_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
+    """A publisher for our messages: msgpack, sent at once (express, no batching:
+    the lockstep waits on every message), and never dropped under congestion
+    (BLOCK), so the recording holds every tick; a frozen peer can hold it up for at
+    most its lease."""
+    return session.declare_publisher(
+        key,
+        encoding=zenoh.Encoding("application/msgpack"),
+        congestion_control=zenoh.CongestionControl.BLOCK,
+        express=True,
+    )
