@@ -19,7 +19,8 @@ def state(**kw):
     return AgentState(**base)
 
 
-@given(finite, st.integers(0, 10**9), st.integers(0, 1000), st.floats(-10, 10), st.floats(-100, 100))
+@given(finite, st.integers(0, 10**9), st.integers(0, 1000), st.floats(-10, 10),
+       st.floats(-100, 100))
 def test_cmd_round_trip(t, k, robot, v, omega):
     msg = Cmd(abs(t), k, robot, v, omega)
     assert decode(Cmd, encode(msg)) == msg

@@ -1,0 +1,141 @@
+"""``btrack record``: subscribe to everything in a run namespace and write DIR/run.mcap.
+
+Zenoh callbacks only stamp the wall clock and push to a queue; the main thread
+drains it through ``recorder.writer.Recording``. The process stops once it has
+written a Tick with ``done=True`` (after a short drain for messages in flight) or
+on SIGTERM/SIGINT, and always leaves a finished, readable MCAP file.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import os
+import queue
+import signal
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from recorder.writer import Recording, RunWriter
+from wire.keys import Keys
+from wire.session import SessionOptions, add_session_args, open_session, options_from_args
+
+CLOSE_TIMEOUT_S = 3.0
+
+
+def parse_args(argv: list[str]) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(
+        prog="btrack record", description="Record everything on the bus into DIR/run.mcap."
+    )
+    parser.add_argument("--out", required=True, metavar="DIR", help="output directory")
+    parser.add_argument(
+        "--drain",
+        type=float,
+        default=0.3,
+        metavar="SECONDS",
+        help="wall time to keep recording after the final tick (messages in flight)",
+    )
+    add_session_args(parser)
+    return parser.parse_args(argv)
+
+
+@contextlib.contextmanager
+def bounded_session(opts: SessionOptions) -> Iterator[zenoh.Session]:
+    """A session closed on exit, without letting a stuck close hang the process."""
+    session = open_session(opts)
+    try:
+        yield session
+    finally:
+        closer = threading.Thread(target=session.close, daemon=True)
+        closer.start()
+        closer.join(CLOSE_TIMEOUT_S)
+        if closer.is_alive():
+            print("btrack record: session close timed out", file=sys.stderr)
+            sys.stdout.flush()
+            os._exit(0)
+
+
+def run(out: Path, opts: SessionOptions, drain_s: float = 0.3) -> dict[str, int]:
+    """Record until the final tick or a signal; return the summary counts."""
+    keys = Keys(opts.ns)
+    out.mkdir(parents=True, exist_ok=True)
+    inbox: queue.SimpleQueue[tuple[str, Any, int]] = queue.SimpleQueue()
+    stop = threading.Event()
+
+    def on_signal(signum: int, frame: Any) -> None:
+        stop.set()
+
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, on_signal)
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        inbox.put((str(sample.key_expr), sample.payload.to_bytes(), time.time_ns()))
+
+    def on_alive(sample: zenoh.Sample) -> None:
+        inbox.put((str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT, time.time_ns()))
+
+    writer = RunWriter(out / "run.mcap")
+    recording = Recording(writer)
+    try:
+        with bounded_session(opts) as session:
+            subscriber = session.declare_subscriber(keys.everything(), on_sample)
+            alive_sub = session.liveliness().declare_subscriber(
+                keys.alive("*"), on_alive, history=True
+            )
+            token = session.liveliness().declare_token(keys.alive_recorder())
+            try:
+                _drain_loop(inbox, recording, keys, stop, drain_s)
+            finally:
+                token.undeclare()
+                alive_sub.undeclare()
+                subscriber.undeclare()
+    finally:
+        writer.close()
+    return recording.summary()
+
+
+def _drain_loop(
+    inbox: queue.SimpleQueue[tuple[str, Any, int]],
+    recording: Recording,
+    keys: Keys,
+    stop: threading.Event,
+    drain_s: float,
+) -> None:
+    relative: dict[str, str] = {}
+    deadline: float | None = None
+    while not stop.is_set():
+        if deadline is None and recording.done:
+            deadline = time.monotonic() + drain_s
+        if deadline is not None and time.monotonic() >= deadline:
+            return
+        try:
+            key, payload, log_ns = inbox.get(timeout=0.05)
+        except queue.Empty:
+            continue
+        topic = relative.get(key)
+        if topic is None:
+            topic = relative[key] = keys.relative(key)
+        if isinstance(payload, bool):
+            recording.handle_alive(topic, payload, log_ns)
+        else:
+            recording.handle(topic, payload, log_ns)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(sys.argv[1:] if argv is None else argv)
+    opts = options_from_args(args)
+    try:
+        Keys(opts.ns)
+    except ValueError as exc:
+        print(f"btrack record: {exc}", file=sys.stderr)
+        return 2
+    counts = run(Path(args.out), opts, args.drain)
+    print(json.dumps(counts), flush=True)
+    return 0

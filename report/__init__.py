@@ -1,0 +1,1 @@
+"""Reports from a recorded run: measures, summary.json, figures, report.md."""

@@ -1,0 +1,134 @@
+"""``btrack report DIR``: measures, summary.json, errors.png, map.png and report.md
+from DIR/run.mcap. ``make_report`` is the same for the launcher."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+from report.load import LoadError, load_run
+from report.measures import steady_state
+from report.series import error_series
+from report.summary import (
+    PHASE_BAND_RAD,
+    WORKLOAD_BAND_M2,
+    compute_summary,
+    json_safe,
+    write_summary,
+)
+
+ROWS = (
+    ("phase_sse_rad", "phase steady-state error, position-based (rad)"),
+    ("phase_sse_path_rad", "phase steady-state error, path length (rad)"),
+    ("phase_max_rad", "phase error, max over last quarter (rad)"),
+    ("workload_sse_m2", "workload steady-state error (m^2)"),
+    ("workload_max_m2", "workload error, max over last quarter (m^2)"),
+    ("phase_q1_rad", "phase error, mean first quarter (rad)"),
+    ("phase_q4_rad", "phase error, mean last quarter (rad)"),
+    ("workload_q1_m2", "workload error, mean first quarter (m^2)"),
+    ("workload_q4_m2", "workload error, mean last quarter (m^2)"),
+    ("phase_converge_s", "phase converged after (s)"),
+    ("workload_converge_s", "workload converged after (s)"),
+    ("converge_s", "converged after (s)"),
+    ("revisit_mean_s", "revisit time, mean (s)"),
+    ("revisit_worst_s", "revisit time, worst (s)"),
+    ("revisit_ideal_s", "revisit time, ideal (s)"),
+    ("speedup", "speed-up (simulated / wall time)"),
+    ("ticks", "ticks recorded"),
+    ("invalid_messages", "invalid messages"),
+)
+
+
+def _fmt(value: Any) -> str:
+    if value is None:
+        return "n/a"
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    return str(value)
+
+
+def report_markdown(
+    summary: dict[str, Any],
+    phase_band: float,
+    workload_band: float,
+    extra: dict[str, Any] | None = None,
+) -> str:
+    head = ", ".join(
+        f"{k} {_fmt(summary.get(k))}"
+        for k in ("map", "start", "robots", "localization", "seed", "duration_s")
+    )
+    lines = [
+        "# Run report",
+        "",
+        head,
+        "",
+        "| measure | value |",
+        "| --- | --- |",
+    ]
+    lines += [f"| {label} | {_fmt(summary.get(key))} |" for key, label in ROWS]
+    lines += [f"| {label} | {_fmt(value)} |" for label, value in (extra or {}).items()]
+    lines += [
+        "",
+        f"Steady state: last quarter of the run; convergence bands {phase_band} rad and "
+        f"{workload_band} m^2 (max over pairs); revisit over the second half; "
+        "workload error from the true patrol depth.",
+        "",
+        "![errors](errors.png)",
+        "",
+        "![map](map.png)",
+        "",
+        "Figures: [errors.png](errors.png), [map.png](map.png); numbers: "
+        "[summary.json](summary.json).",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def make_report(
+    run_dir: str | Path,
+    phase_band: float = PHASE_BAND_RAD,
+    workload_band: float = WORKLOAD_BAND_M2,
+) -> dict[str, Any]:
+    """Write summary.json, errors.png, map.png and report.md into ``run_dir``; return the
+    summary. Raises ``LoadError`` if run_dir/run.mcap is missing or unreadable."""
+    from report.figures import errors_figure, map_figure  # matplotlib only when drawing
+
+    run_dir = Path(run_dir)
+    run = load_run(run_dir / "run.mcap")
+    series = error_series(run)
+    summary = compute_summary(run, series, phase_band, workload_band)
+    write_summary(run_dir / "summary.json", summary)
+    errors_figure(series, run_dir / "errors.png")
+    map_figure(run, run_dir / "map.png")
+    agents_sse, agents_max = steady_state(series.t, series.workload_agents)
+    extra = {
+        "workload steady-state error, agents' own estimates (m^2)": json_safe(agents_sse),
+        "workload error, agents' own, max over last quarter (m^2)": json_safe(agents_max),
+    }
+    markdown = report_markdown(summary, phase_band, workload_band, extra)
+    (run_dir / "report.md").write_text(markdown)
+    return summary
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="btrack report",
+        description="Measures, summary.json, errors.png, map.png and report.md from DIR/run.mcap.",
+    )
+    parser.add_argument("dir", metavar="DIR", help="run directory holding run.mcap")
+    parser.add_argument("--phase-band", type=float, default=PHASE_BAND_RAD, metavar="RAD")
+    parser.add_argument("--workload-band", type=float, default=WORKLOAD_BAND_M2, metavar="M2")
+    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    try:
+        summary = make_report(args.dir, args.phase_band, args.workload_band)
+    except LoadError as exc:
+        print(f"btrack report: {exc}", file=sys.stderr)
+        return 2
+    print(
+        f"btrack report: wrote {Path(args.dir) / 'report.md'} "
+        f"(phase sse {_fmt(summary['phase_sse_rad'])} rad, "
+        f"workload sse {_fmt(summary['workload_sse_m2'])} m^2)"
+    )
+    return 0

@@ -1,0 +1,127 @@
+"""Figures of a recorded run: errors.png (errors per pair against time) and map.png
+(top-down view of water, ice, algae and the robots' tracks)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.patches import Patch, Rectangle  # noqa: E402
+
+from report.load import RunData  # noqa: E402
+from report.series import ErrorSeries  # noqa: E402
+
+WATER = "#3a7dc9"
+ICE = "#ffffff"
+ALGAE = "#3fa34d"
+MAX_POINTS = 20000  # per line; longer tracks are thinned for drawing only
+
+
+def _thin(n: int) -> slice:
+    return slice(None, None, max(1, n // MAX_POINTS))
+
+
+def errors_figure(series: ErrorSeries, path: str | Path) -> None:
+    """Phase error and workload error per neighbour pair against time, two panels."""
+    fig, (ax_phase, ax_work) = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
+    t = series.t
+    step = _thin(t.size)
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for j, (a, b) in enumerate(series.pairs):
+        c = colours[j % len(colours)]
+        label = f"pair {a}-{b}"
+        ax_phase.plot(
+            t[step], series.phase[j][step], color=c, lw=1.2, label=f"{label} (position, eq. 3.1)"
+        )
+        ax_phase.plot(
+            t[step],
+            series.phase_path[j][step],
+            color=c,
+            lw=0.8,
+            ls=":",
+            label=f"{label} (path length)",
+        )
+        ax_work.plot(
+            t[step], series.workload[j][step], color=c, lw=1.2, label=f"{label} (true depth)"
+        )
+        ax_work.plot(
+            t[step],
+            series.workload_agents[j][step],
+            color=c,
+            lw=0.8,
+            ls="--",
+            label=f"{label} (agents' estimate)",
+        )
+    ax_phase.set_title("Phase error e_phi,i = wrap(phi_i+1 - phi_i)")
+    ax_phase.set_ylabel("phase error (rad)")
+    ax_phase.set_ylim(-np.pi * 1.05, np.pi * 1.05)
+    ax_work.set_title("Workload error e_Psi,i = Psi_i+1 - Psi_i")
+    ax_work.set_ylabel("workload error (m^2)")
+    ax_work.set_xlabel("simulation time (s)")
+    for ax in (ax_phase, ax_work):
+        ax.axhline(0.0, color="grey", lw=0.6)
+        ax.grid(True, alpha=0.3)
+        if series.pairs:
+            ax.legend(loc="upper right", fontsize=7, ncol=2)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def map_figure(run: RunData, path: str | Path) -> None:
+    """Top-down map: water (y < 0), ice, the algae band and patrol depth, robot tracks."""
+    info = run.info
+    fig, ax = plt.subplots(figsize=(10, 6))
+    edge_lo = float(info.get("edge_lo", 0.0))
+    edge_hi = float(info.get("edge_hi", 1.0))
+    bin_m = float(info.get("bin_m") or 0.1)
+    depth = np.asarray(info.get("patrol_depth") or [], dtype=float)
+    min_depth = float(info.get("min_depth", 0.0))
+    xs = [tr.x for tr in run.truth.values()]
+    ys = [tr.y for tr in run.truth.values()]
+    all_x = np.concatenate(xs + [np.array([edge_lo, edge_hi])])
+    all_y = np.concatenate(ys + [np.array([-1.0, depth.max() if depth.size else 1.0])])
+    x0, x1 = float(all_x.min()) - 0.5, float(all_x.max()) + 0.5
+    y0, y1 = float(all_y.min()) - 0.5, float(all_y.max()) + 0.5
+    ax.add_patch(Rectangle((x0, y0), x1 - x0, -y0, color=WATER, alpha=0.35, lw=0))
+    ax.add_patch(Rectangle((x0, 0.0), x1 - x0, y1, facecolor=ICE, edgecolor="none"))
+    if depth.size:
+        left = edge_lo + bin_m * np.arange(depth.size)
+        algae = np.where(depth > min_depth, depth, 0.0)
+        ax.bar(left, algae, width=bin_m, align="edge", bottom=0.0, color=ALGAE, alpha=0.6, lw=0)
+        edges = np.append(left, left[-1] + bin_m)
+        ax.stairs(depth, edges, color="darkgreen", lw=1.2, label="patrol depth")
+    ax.plot([edge_lo, edge_hi], [0.0, 0.0], color="black", lw=1.5, label="edge")
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for j, (robot, tr) in enumerate(sorted(run.truth.items())):
+        c = colours[j % len(colours)]
+        step = _thin(tr.x.size)
+        ax.plot(tr.x[step], tr.y[step], color=c, lw=0.7, label=f"robot {robot}")
+        if tr.x.size:
+            ax.plot(tr.x[0], tr.y[0], marker="o", ms=8, mfc=c, mec="black", ls="none")
+    ax.plot([], [], marker="o", ms=8, mfc="none", mec="black", ls="none", label="start")
+    ax.add_artist(ax.legend(loc="upper right", fontsize=8))
+    ax.legend(
+        handles=[
+            Patch(color=WATER, alpha=0.35, label="water"),
+            Patch(facecolor=ICE, edgecolor="grey", label="ice"),
+            Patch(color=ALGAE, alpha=0.6, label="algae"),
+        ],
+        loc="upper left",
+        fontsize=8,
+    )
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x along the edge (m)")
+    ax.set_ylabel("y into the ice (m)")
+    title = f"map {info.get('map', '?')}, start {info.get('start', '?')}: robot tracks (truth)"
+    ax.set_title(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

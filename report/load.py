@@ -1,0 +1,126 @@
+"""Read a run.mcap (as written by the recorder) into plain numpy arrays."""
+
+from __future__ import annotations
+
+import json
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from mcap.reader import make_reader
+
+STATE_FIELDS = ("t", "lo", "hi", "phase", "phase_des", "workload", "depth_avg", "direction")
+TRUTH_FIELDS = ("t", "x", "y", "theta")
+
+
+class LoadError(Exception):
+    """The recording is missing or cannot be read."""
+
+
+@dataclass
+class Truth:
+    """Ground-truth track of one robot, sorted by time."""
+
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    theta: np.ndarray
+
+
+@dataclass
+class States:
+    """What one agent published (its AgentState messages), sorted by time."""
+
+    t: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    phase: np.ndarray
+    phase_des: np.ndarray
+    workload: np.ndarray
+    depth_avg: np.ndarray
+    direction: np.ndarray
+
+
+@dataclass
+class RunData:
+    info: dict[str, Any]  # the last WorldInfo, {} if none was recorded
+    tick_t: np.ndarray  # simulation time of each tick
+    tick_log_ns: np.ndarray  # wall clock (ns) at which the recorder received each tick
+    truth: dict[int, Truth] = field(default_factory=dict)
+    states: dict[int, States] = field(default_factory=dict)
+    invalid: int = 0
+    alive: dict[int, list[tuple[int, bool]]] = field(default_factory=dict)  # (log ns, alive)
+
+    @property
+    def robot_ids(self) -> list[int]:
+        return sorted(set(self.truth) | set(self.states))
+
+
+def _columns(rows: list[tuple[float, ...]], names: tuple[str, ...]) -> dict[str, np.ndarray]:
+    arr = np.asarray(rows, dtype=float).reshape(-1, len(names))
+    arr = arr[np.argsort(arr[:, 0], kind="stable")]
+    return {name: arr[:, j].copy() for j, name in enumerate(names)}
+
+
+def _robot(topic: str) -> int | None:
+    parts = topic.split("/")
+    return int(parts[1]) if len(parts) >= 3 and parts[1].isdigit() else None
+
+
+def load_run(path: str | Path) -> RunData:
+    """Load ``path`` (a run.mcap, or a directory holding one); raise ``LoadError``."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "run.mcap"
+    if not path.is_file():
+        raise LoadError(f"no recording at {path}")
+    info: dict[str, Any] = {}
+    ticks: list[tuple[float, int]] = []
+    truth: dict[int, list[tuple[float, ...]]] = defaultdict(list)
+    states: dict[int, list[tuple[float, ...]]] = defaultdict(list)
+    alive: dict[int, list[tuple[int, bool]]] = defaultdict(list)
+    invalid = 0
+    try:
+        with open(path, "rb") as stream:
+            reader = make_reader(stream)
+            for _schema, channel, message in reader.iter_messages(log_time_order=False):
+                topic = channel.topic
+                if topic.startswith("invalid/"):
+                    invalid += 1
+                    continue
+                if topic == "world/tick":
+                    msg = json.loads(message.data)
+                    ticks.append((msg["t"], message.log_time))
+                elif topic.endswith("/truth"):
+                    msg = json.loads(message.data)
+                    truth[int(msg["robot"])].append((msg["t"], msg["x"], msg["y"], msg["theta"]))
+                elif topic.endswith("/state") and topic.startswith("agent/"):
+                    msg = json.loads(message.data)
+                    states[int(msg["robot"])].append(tuple(msg[f] for f in STATE_FIELDS))
+                elif topic == "world/info":
+                    info = json.loads(message.data)
+                elif topic.startswith("alive/agent/"):
+                    robot = _robot(topic)
+                    if robot is not None:
+                        alive[robot].append(
+                            (message.log_time, bool(json.loads(message.data)["alive"]))
+                        )
+    except LoadError:
+        raise
+    except Exception as exc:  # the mcap reader raises many types on a damaged file
+        raise LoadError(f"cannot read {path}: {type(exc).__name__}: {exc}") from None
+
+    tick_arr = np.asarray(ticks, dtype=float).reshape(-1, 2)
+    order = np.argsort(tick_arr[:, 0], kind="stable")
+    tick_log = np.asarray([ticks[i][1] for i in order], dtype=np.int64)
+    return RunData(
+        info=info,
+        tick_t=tick_arr[order, 0].copy(),
+        tick_log_ns=tick_log,
+        truth={r: Truth(**_columns(rows, TRUTH_FIELDS)) for r, rows in truth.items()},
+        states={r: States(**_columns(rows, STATE_FIELDS)) for r, rows in states.items()},
+        invalid=invalid,
+        alive={r: sorted(ev) for r, ev in alive.items()},
+    )

@@ -1,0 +1,80 @@
+"""Error time series of a recorded run: phase and workload errors per neighbour pair
+on one time grid (the ticks). Pure: arrays in, arrays out."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from report import measures as m
+from report.load import RunData
+
+
+@dataclass
+class ErrorSeries:
+    t: np.ndarray  # simulation time of each sample (the ticks), s
+    pairs: list[tuple[int, int]]  # neighbour pairs (i, i+1), one row per pair below
+    phase: np.ndarray  # e_phi with the position-based phase (eq. 3.1), rad
+    phase_path: np.ndarray  # e_phi with the path-length phase, rad
+    workload: np.ndarray  # e_Psi with the true workload (true patrol depth), m^2
+    workload_agents: np.ndarray  # e_Psi from the workloads the agents published, m^2
+
+
+def time_grid(run: RunData) -> np.ndarray:
+    """The ticks' times, or every recorded time if no tick was recorded."""
+    if run.tick_t.size:
+        return np.unique(run.tick_t)
+    parts = [tr.t for tr in run.truth.values()] + [st.t for st in run.states.values()]
+    return np.unique(np.concatenate(parts)) if parts else np.empty(0)
+
+
+def max_age_s(run: RunData) -> float:
+    """How long a robot's last message stands for it (a dead agent drops out after this)."""
+    dt = float(run.info.get("dt") or 0.1)
+    return max(10.0 * dt, 1.0)
+
+
+def error_series(run: RunData) -> ErrorSeries:
+    t = time_grid(run)
+    age = max_age_s(run)
+    ids = sorted(set(run.truth) & set(run.states))
+    pairs = m.neighbour_pairs(ids)
+    depth = run.info.get("patrol_depth") or []
+    edge_lo = float(run.info.get("edge_lo", 0.0))
+    bin_m = float(run.info.get("bin_m") or 0.1)
+
+    phase: dict[int, np.ndarray] = {}
+    phase_path: dict[int, np.ndarray] = {}
+    work: dict[int, np.ndarray] = {}
+    work_agents: dict[int, np.ndarray] = {}
+    for i in ids:
+        tr, st = run.truth[i], run.states[i]
+        x = m.hold(tr.t, tr.x, t, age)
+        lo = m.hold(st.t, st.lo, t, age)
+        hi = m.hold(st.t, st.hi, t, age)
+        direction = m.hold(st.t, st.direction, t, age)
+        phase[i] = m.position_phase(x, lo, hi, direction)
+        dir_on_track = m.hold(st.t, st.direction, tr.t, age)
+        along_path = m.path_length_phase(tr.x, tr.y, dir_on_track)
+        phase_path[i] = m.hold(tr.t, along_path, t, age)
+        work[i] = (
+            m.true_workload(lo, hi, edge_lo, bin_m, depth)
+            if len(depth)
+            else np.full(t.shape, np.nan)
+        )
+        work_agents[i] = m.hold(st.t, st.workload, t, age)
+
+    def errors(values: dict[int, np.ndarray], wrap: bool) -> np.ndarray:
+        if not pairs:
+            return np.empty((0, t.size))
+        return m.pair_errors(values, pairs, wrap)
+
+    return ErrorSeries(
+        t=t,
+        pairs=pairs,
+        phase=errors(phase, True),
+        phase_path=errors(phase_path, True),
+        workload=errors(work, False),
+        workload_agents=errors(work_agents, False),
+    )

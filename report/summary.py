@@ -1,0 +1,139 @@
+"""summary.json: the run's parameters and its measures, JSON-safe (NaN becomes null)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from report import measures as m
+from report.load import RunData
+from report.series import ErrorSeries, error_series, time_grid
+
+PHASE_BAND_RAD = 0.15
+WORKLOAD_BAND_M2 = 0.05
+VISIT_MERGE_S = 1.0
+POINT_STEP_M = 0.1
+
+KEYS = (
+    "map",
+    "start",
+    "robots",
+    "localization",
+    "seed",
+    "duration_s",
+    "speedup",
+    "phase_sse_rad",
+    "phase_sse_path_rad",
+    "phase_max_rad",
+    "workload_sse_m2",
+    "workload_max_m2",
+    "converge_s",
+    "phase_converge_s",
+    "workload_converge_s",
+    "revisit_mean_s",
+    "revisit_worst_s",
+    "revisit_ideal_s",
+    "phase_q1_rad",
+    "phase_q4_rad",
+    "workload_q1_m2",
+    "workload_q4_m2",
+    "ticks",
+    "invalid_messages",
+)
+
+
+def json_safe(value: Any) -> Any:
+    """``value`` with NaN/inf as None and numpy scalars as Python numbers."""
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def _later(a: float, b: float) -> float:
+    return max(a, b) if math.isfinite(a) and math.isfinite(b) else math.nan
+
+
+def revisit(run: RunData, t: np.ndarray) -> tuple[float, float, float]:
+    """Mean, worst and ideal revisit time over the second half of the run."""
+    info = run.info
+    if t.size < 2 or not run.truth or "edge_lo" not in info:
+        return math.nan, math.nan, math.nan
+    t_from, t_to = float(t[0] + 0.5 * (t[-1] - t[0])), float(t[-1])
+    edge_lo, edge_hi = float(info["edge_lo"]), float(info["edge_hi"])
+    radius = float(info.get("robot_radius", 0.17))
+    visit_t, visit_x = [], []
+    for tr in run.truth.values():
+        tc, xc = m.crossings(tr.t, tr.x, tr.y)
+        visit_t.append(tc)
+        visit_x.append(xc)
+    points = m.edge_points(edge_lo, edge_hi, POINT_STEP_M)
+    mean, worst = m.revisit_intervals(
+        points,
+        np.concatenate(visit_t),
+        np.concatenate(visit_x),
+        radius,
+        t_from,
+        t_to,
+        VISIT_MERGE_S,
+    )
+    rate = m.sweep_rate([(tr.t, tr.x) for tr in run.truth.values()], t_from, t_to)
+    return mean, worst, m.ideal_revisit(edge_hi - edge_lo, rate)
+
+
+def compute_summary(
+    run: RunData,
+    series: ErrorSeries | None = None,
+    phase_band: float = PHASE_BAND_RAD,
+    workload_band: float = WORKLOAD_BAND_M2,
+) -> dict[str, Any]:
+    """Every measure of the run, keyed as in ``KEYS`` (NaN where it cannot be computed)."""
+    s = error_series(run) if series is None else series
+    info = run.info
+    phase_sse, phase_max = m.steady_state(s.t, s.phase)
+    path_sse, _ = m.steady_state(s.t, s.phase_path)
+    work_sse, work_max = m.steady_state(s.t, s.workload)
+    phase_conv = m.converge_time(s.t, s.phase, phase_band)
+    work_conv = m.converge_time(s.t, s.workload, workload_band)
+    rev_mean, rev_worst, rev_ideal = revisit(run, time_grid(run))
+    out: dict[str, Any] = {
+        "map": info.get("map"),
+        "start": info.get("start"),
+        "robots": info.get("robots", len(run.robot_ids)),
+        "localization": info.get("localization"),
+        "seed": info.get("seed"),
+        "duration_s": info.get("duration_s"),
+        "speedup": m.speedup(run.tick_t, run.tick_log_ns),
+        "phase_sse_rad": phase_sse,
+        "phase_sse_path_rad": path_sse,
+        "phase_max_rad": phase_max,
+        "workload_sse_m2": work_sse,
+        "workload_max_m2": work_max,
+        "converge_s": _later(phase_conv, work_conv),
+        "phase_converge_s": phase_conv,
+        "workload_converge_s": work_conv,
+        "revisit_mean_s": rev_mean,
+        "revisit_worst_s": rev_worst,
+        "revisit_ideal_s": rev_ideal,
+        "phase_q1_rad": m.window_abs(s.t, s.phase, 0.0, 0.25)[0],
+        "phase_q4_rad": m.window_abs(s.t, s.phase, 0.75, 1.0)[0],
+        "workload_q1_m2": m.window_abs(s.t, s.workload, 0.0, 0.25)[0],
+        "workload_q4_m2": m.window_abs(s.t, s.workload, 0.75, 1.0)[0],
+        "ticks": int(run.tick_t.size),
+        "invalid_messages": int(run.invalid),
+    }
+    assert tuple(out) == KEYS
+    return json_safe(out)
+
+
+def write_summary(path: str | Path, summary: dict[str, Any]) -> None:
+    Path(path).write_text(json.dumps(json_safe(summary), indent=2, allow_nan=False) + "\n")

@@ -1,0 +1,162 @@
+"""``btrack record`` as a real process on a private namespace: it records what crosses
+the bus, stores garbage as an invalid record, and stops by itself on the final tick."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import threading
+from collections import Counter
+from pathlib import Path
+
+import zenoh
+from mcap.reader import make_reader
+
+from tests.procutil import end, free_port, unique_ns
+from wire import AgentState, Keys, Tick, Truth, WorldInfo, encode
+from wire.session import SessionOptions, open_session
+
+
+def start_recorder(out: Path, ns: str, port: int) -> subprocess.Popen[bytes]:
+    return subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "btrack",
+            "record",
+            "--out",
+            str(out),
+            "--ns",
+            ns,
+            "--no-multicast",
+            "--listen",
+            f"tcp/127.0.0.1:{port}",
+        ],
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        start_new_session=True,
+    )
+
+
+def bus_session(ns: str, port: int) -> zenoh.Session:
+    return open_session(
+        SessionOptions(ns=ns, mode="peer", connect=(f"tcp/127.0.0.1:{port}",), multicast=False)
+    )
+
+
+def wait_recorder_alive(session: zenoh.Session, keys: Keys, timeout: float = 30.0) -> None:
+    seen = threading.Event()
+    sub = session.liveliness().declare_subscriber(
+        keys.alive_recorder(),
+        lambda s: seen.set() if s.kind == zenoh.SampleKind.PUT else None,
+        history=True,
+    )
+    try:
+        assert seen.wait(timeout), "the recorder's liveliness token never appeared"
+    finally:
+        sub.undeclare()
+
+
+def read_topics(path: Path) -> tuple[Counter[str], dict[str, list[dict]]]:
+    counts: Counter[str] = Counter()
+    data: dict[str, list[dict]] = {}
+    with open(path, "rb") as stream:
+        for schema, channel, message in make_reader(stream).iter_messages():
+            counts[channel.topic] += 1
+            data.setdefault(channel.topic, []).append(json.loads(message.data))
+            assert channel.message_encoding == "json"
+            assert schema is not None and schema.encoding == "jsonschema"
+    return counts, data
+
+
+def state(k: int) -> AgentState:
+    return AgentState(
+        t=k * 0.1,
+        k=k,
+        robot=0,
+        lo=0.0,
+        hi=2.0,
+        phase=0.5,
+        phase_des=0.5,
+        workload=0.6,
+        depth_avg=0.3,
+        direction=1,
+        lower=-1,
+        upper=1,
+        edge_lo=0.0,
+        edge_hi=6.0,
+    )
+
+
+def test_recorder_records_and_stops_on_final_tick(tmp_path: Path) -> None:
+    ns, port = unique_ns(), free_port()
+    keys = Keys(ns)
+    proc = start_recorder(tmp_path, ns, port)
+    try:
+        with bus_session(ns, port) as session:
+            wait_recorder_alive(session, keys)
+            token = session.liveliness().declare_token(keys.alive(0))
+            info = WorldInfo(
+                map="no-algae",
+                start="in-phase",
+                robots=1,
+                localization="truth",
+                seed=1,
+                duration_s=0.3,
+                dt=0.1,
+                edge_lo=0.0,
+                edge_hi=6.0,
+                bin_m=0.1,
+                patrol_depth=[0.3] * 60,
+                robot_radius=0.17,
+                min_depth=0.3,
+                margin_out=0.3,
+            )
+            session.put(keys.world_info(), encode(info))
+            for k in range(3):
+                session.put(keys.truth(0), encode(Truth(k * 0.1, k, 0, 1.0, -1.0, 0.0)))
+                session.put(keys.state(0), encode(state(k)))
+                session.put(keys.world_tick(), encode(Tick(k * 0.1, k, [0])))
+            session.put(keys.state(0), b"\x93\x01\x02")  # a msgpack list, not a state
+            session.put(keys.world_tick(), encode(Tick(0.3, 3, [0], done=True)))
+            out, err = proc.communicate(timeout=30)
+            token.undeclare()
+        assert proc.returncode == 0, err.decode()
+        assert json.loads(out.decode().strip().splitlines()[-1]) == {"messages": 12, "invalid": 1}
+        counts, data = read_topics(tmp_path / "run.mcap")
+        assert counts["world/info"] == 1
+        assert counts["robot/0/truth"] == 3
+        assert counts["agent/0/state"] == 3
+        assert counts["world/tick"] == 4
+        assert counts["invalid/agent/0/state"] == 1
+        assert data["invalid/agent/0/state"][0]["hex"] == "93 01 02".replace(" ", "")
+        assert data["alive/agent/0"] == [{"alive": True}]
+        assert data["world/tick"][-1]["done"] is True
+        assert data["agent/0/state"][2]["k"] == 2
+    finally:
+        end(proc)
+
+
+def test_recorder_finishes_the_file_on_sigterm(tmp_path: Path) -> None:
+    ns, port = unique_ns(), free_port()
+    keys = Keys(ns)
+    proc = start_recorder(tmp_path, ns, port)
+    try:
+        with bus_session(ns, port) as session:
+            wait_recorder_alive(session, keys)
+            session.put(keys.world_tick(), encode(Tick(0.0, 0, [])))
+            session.put(keys.world_tick(), b"garbage")
+            session.put(keys.world_tick(), encode(Tick(0.1, 1, [])))
+            proc.send_signal(signal.SIGTERM)
+            out, err = proc.communicate(timeout=30)
+        assert proc.returncode == 0, err.decode()
+        summary = json.loads(out.decode().strip().splitlines()[-1])
+        # whatever arrived before the signal is in a finished, readable file
+        counts, _ = read_topics(tmp_path / "run.mcap")
+        assert counts["world/tick"] == summary["messages"]
+        assert counts["invalid/world/tick"] == summary["invalid"]
+    finally:
+        end(proc)

@@ -1,0 +1,75 @@
+"""``btrack report`` on a synthetic run written through the recorder's own writer."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from report.summary import KEYS
+from report.synthetic import write_synthetic_run
+
+PNG = b"\x89PNG\r\n\x1a\n"
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def btrack(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "btrack", *args],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+
+
+def test_report_writes_summary_figures_and_markdown(tmp_path: Path) -> None:
+    write_synthetic_run(tmp_path, duration_s=60.0, garbage=3)
+    done = btrack("report", str(tmp_path))
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert tuple(summary) == KEYS
+    for name in ("errors.png", "map.png"):
+        assert (tmp_path / name).read_bytes()[:8] == PNG
+    text = (tmp_path / "report.md").read_text()
+    assert "errors.png" in text and "map.png" in text
+    assert summary["map"] == "synthetic" and summary["robots"] == 3
+    assert summary["ticks"] == 601
+    assert summary["invalid_messages"] == 3
+    assert summary["speedup"] == pytest.approx(100.0, rel=1e-3)
+    # the synthetic offset of 2 pi / 5 decays with an 8 s time constant: inside the
+    # 0.15 rad band after 8 ln(1.2566 / 0.15) = 17.0 s, near zero by the last quarter
+    assert summary["phase_converge_s"] == pytest.approx(
+        8 * math.log(2 * math.pi / 5 / 0.15), abs=0.2
+    )
+    assert summary["phase_sse_rad"] < 0.01
+    assert summary["phase_q1_rad"] > 0.3
+    # half-algae depth with equal segments: true workloads 2.4, 1.2 + 0.6... pairs -1.2 m^2
+    assert summary["workload_sse_m2"] == pytest.approx(1.2, abs=1e-6)
+    assert summary["workload_converge_s"] is None and summary["converge_s"] is None
+    assert summary["revisit_ideal_s"] > 0
+
+
+def test_make_report_returns_the_summary(tmp_path: Path) -> None:
+    from report.cli import make_report
+
+    write_synthetic_run(tmp_path, duration_s=10.0)
+    summary = make_report(tmp_path)
+    assert summary == json.loads((tmp_path / "summary.json").read_text())
+
+
+def test_missing_recording_is_a_clear_error(tmp_path: Path) -> None:
+    done = btrack("report", str(tmp_path / "nowhere"))
+    assert done.returncode == 2
+    assert "no recording" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_unreadable_recording_is_a_clear_error(tmp_path: Path) -> None:
+    (tmp_path / "run.mcap").write_bytes(b"\x89MCAP0\r\n" + b"garbage" * 10)
+    done = btrack("report", str(tmp_path))
+    assert done.returncode == 2
+    assert "cannot read" in done.stderr and "Traceback" not in done.stderr
