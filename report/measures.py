@@ -188,11 +188,32 @@ def max_over_pairs(errors: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(top), top, np.nan)
 
 
-def converge_time(t: np.ndarray, errors: np.ndarray, band: float) -> float:
-    """Time (from the first sample) after which max-over-pairs |e| stays within ``band``
-    for the rest of the run; NaN if it never settles. Samples with no value are skipped."""
+def running_mean(t: np.ndarray, values: np.ndarray, window_s: float) -> np.ndarray:
+    """Trailing mean of ``values`` over the last ``window_s`` seconds, skipping NaNs."""
     t = np.asarray(t, dtype=float)
-    worst = max_over_pairs(errors)
+    values = np.asarray(values, dtype=float)
+    if window_s <= 0 or t.size < 2:
+        return values
+    known = np.isfinite(values)
+    csum = np.concatenate([[0.0], np.cumsum(np.where(known, values, 0.0))])
+    ccount = np.concatenate([[0], np.cumsum(known)])
+    start = np.searchsorted(t, t - window_s, side="left")
+    end = np.arange(1, t.size + 1)
+    count = ccount[end] - ccount[start]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = (csum[end] - csum[start]) / count
+    return np.where(count > 0, out, np.nan)
+
+
+def converge_time(t: np.ndarray, errors: np.ndarray, band: float, smooth_s: float = 0.0
+                  ) -> float:
+    """Time (from the first sample) after which max-over-pairs |e|, averaged over the
+    trailing ``smooth_s`` seconds, stays within ``band`` for the rest of the run; NaN if
+    it never settles. The average spans a patrol pass, so the saw-tooth that the
+    position-based phase makes within each pass does not count as leaving the band.
+    Samples with no value are skipped."""
+    t = np.asarray(t, dtype=float)
+    worst = running_mean(t, max_over_pairs(errors), smooth_s)
     known = np.flatnonzero(np.isfinite(worst))
     if t.size == 0 or known.size == 0:
         return math.nan
@@ -232,16 +253,27 @@ def revisit_intervals(
     t_from: float,
     t_to: float,
     merge_s: float = 1.0,
+    visit_group: np.ndarray | None = None,
 ) -> tuple[float, float]:
     """Mean and worst time between consecutive visits of each point, over visits in
-    [t_from, t_to]. A visit is a crossing within ``radius`` of the point; a point seen
-    fewer than twice in the window counts the whole window as its worst interval."""
+    [t_from, t_to]. A visit is a crossing within ``radius`` of the point; crossings of
+    one point with the same ``visit_group`` (one robot's one sweep along its segment)
+    count as one visit, at the first. A point seen fewer than twice in the window
+    counts the whole window as its worst interval."""
     visit_t = np.asarray(visit_t, dtype=float)
     visit_x = np.asarray(visit_x, dtype=float)
+    order = np.argsort(visit_t, kind="stable")
+    visit_t, visit_x = visit_t[order], visit_x[order]
+    groups = None if visit_group is None else np.asarray(visit_group)[order]
     intervals: list[np.ndarray] = []
     worst = math.nan
     for p in np.asarray(points, dtype=float):
-        times = merge_visits(visit_t[np.abs(visit_x - p) <= radius], merge_s)
+        near = np.abs(visit_x - p) <= radius
+        times = visit_t[near]
+        if groups is not None and times.size:
+            _, first = np.unique(groups[near], return_index=True)
+            times = np.sort(times[first])
+        times = merge_visits(times, merge_s)
         times = times[(times >= t_from) & (times <= t_to)]
         if times.size < 2:
             worst = max(t_to - t_from, worst) if math.isfinite(worst) else t_to - t_from

@@ -16,6 +16,7 @@ from report.series import ErrorSeries, error_series, time_grid
 PHASE_BAND_RAD = 0.15
 WORKLOAD_BAND_M2 = 0.05
 VISIT_MERGE_S = 1.0
+CONVERGE_SMOOTH_S = 10.0  # converge on |e| averaged over about two patrol passes
 POINT_STEP_M = 0.1
 
 KEYS = (
@@ -63,6 +64,16 @@ def _later(a: float, b: float) -> float:
     return max(a, b) if math.isfinite(a) and math.isfinite(b) else math.nan
 
 
+def sweep_index(run: RunData, rid: int, at_t: np.ndarray) -> np.ndarray:
+    """Which sweep of robot ``rid`` (count of its reversals so far) each time falls in."""
+    st = run.states.get(rid)
+    if st is None or st.t.size == 0:
+        return np.zeros(np.asarray(at_t).size, dtype=np.int64)
+    reversals = np.concatenate([[0], np.cumsum(np.diff(st.direction) != 0)])
+    idx = np.clip(np.searchsorted(st.t, at_t, side="right") - 1, 0, st.t.size - 1)
+    return reversals[idx].astype(np.int64)
+
+
 def revisit(run: RunData, t: np.ndarray) -> tuple[float, float, float]:
     """Mean, worst and ideal revisit time over the second half of the run."""
     info = run.info
@@ -71,11 +82,12 @@ def revisit(run: RunData, t: np.ndarray) -> tuple[float, float, float]:
     t_from, t_to = float(t[0] + 0.5 * (t[-1] - t[0])), float(t[-1])
     edge_lo, edge_hi = float(info["edge_lo"]), float(info["edge_hi"])
     radius = float(info.get("robot_radius", 0.17))
-    visit_t, visit_x = [], []
-    for tr in run.truth.values():
+    visit_t, visit_x, visit_group = [], [], []
+    for rid, tr in run.truth.items():
         tc, xc = m.crossings(tr.t, tr.x, tr.y)
         visit_t.append(tc)
         visit_x.append(xc)
+        visit_group.append(rid * 1_000_000 + sweep_index(run, rid, tc))
     points = m.edge_points(edge_lo, edge_hi, POINT_STEP_M)
     mean, worst = m.revisit_intervals(
         points,
@@ -85,6 +97,7 @@ def revisit(run: RunData, t: np.ndarray) -> tuple[float, float, float]:
         t_from,
         t_to,
         VISIT_MERGE_S,
+        np.concatenate(visit_group),
     )
     rate = m.sweep_rate([(tr.t, tr.x) for tr in run.truth.values()], t_from, t_to)
     return mean, worst, m.ideal_revisit(edge_hi - edge_lo, rate)
@@ -102,8 +115,8 @@ def compute_summary(
     phase_sse, phase_max = m.steady_state(s.t, s.phase)
     path_sse, _ = m.steady_state(s.t, s.phase_path)
     work_sse, work_max = m.steady_state(s.t, s.workload)
-    phase_conv = m.converge_time(s.t, s.phase, phase_band)
-    work_conv = m.converge_time(s.t, s.workload, workload_band)
+    phase_conv = m.converge_time(s.t, s.phase, phase_band, CONVERGE_SMOOTH_S)
+    work_conv = m.converge_time(s.t, s.workload, workload_band, CONVERGE_SMOOTH_S)
     rev_mean, rev_worst, rev_ideal = revisit(run, time_grid(run))
     out: dict[str, Any] = {
         "map": info.get("map"),

@@ -196,3 +196,18 @@ def test_speedup() -> None:
     log_ns = (t * 1e9 / 50.0).astype(np.int64) + 123
     assert m.speedup(t, log_ns) == pytest.approx(50.0, rel=1e-6)
     assert math.isnan(m.speedup(t[:1], log_ns[:1]))
+
+
+def test_running_mean_and_smoothed_convergence_ignore_a_sawtooth():
+    import numpy as np
+
+    from report import measures as m
+
+    t = np.arange(0.0, 200.0, 0.1)
+    # a decaying error plus a 5 s saw-tooth of amplitude 0.2 that never goes away
+    saw = 0.2 * ((t % 5.0) / 5.0)
+    e = np.exp(-t / 10.0) + saw
+    assert np.isnan(m.converge_time(t, e[None, :], 0.15))  # raw: the teeth leave the band
+    settled = m.converge_time(t, e[None, :], 0.15, smooth_s=10.0)
+    assert 20.0 < settled < 40.0  # smoothed: the mean tooth (0.1) is inside the band
+    assert np.allclose(m.running_mean(t, np.ones_like(t), 10.0), 1.0)
