@@ -29,7 +29,11 @@ HISTORY = 8  # neighbour states kept per neighbour, by tick
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="btrack agent", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(
+        prog="btrack agent",
+        description="One robot's controller (meant for the robot's own computer): hears its "
+        "robot and its two neighbours, balances workload and phase, commands its robot.",
+    )
     p.add_argument("--id", type=int, required=True, help="this robot's id (0-based)")
     p.add_argument("--robots", type=int, required=True,
                    help="team size: sets the initial equal segment and the gain check")

@@ -26,7 +26,11 @@ from wire.session import SessionOptions, open_session
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="btrack sim", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(
+        prog="btrack sim",
+        description="Run a simulated team on this machine, every part its own OS process: "
+        "world, recorder and N agents over Zenoh on loopback; then write the report.",
+    )
     p.add_argument("--robots", type=int, default=3, help="team size (default 3)")
     p.add_argument("--map", default="half-algae",
                    help="no-algae | half-algae | random-algae | FILE.png (default half-algae)")
@@ -40,11 +44,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, help="output directory (default runs/<time>)")
     p.add_argument("--realtime", action="store_true", help="pace the world on the wall clock")
     p.add_argument("--config", metavar="FILE.toml", help="agent configuration for every agent")
-    p.add_argument("--k-s", type=float)
-    p.add_argument("--k-phi", type=float)
-    p.add_argument("--k-v", type=float)
-    p.add_argument("--cycle-s", type=float)
-    p.add_argument("--passes", type=int)
+    p.add_argument("--k-s", type=float, help="workload gain K_s per tick (eq. 4.3)")
+    p.add_argument("--k-phi", type=float, help="phase consensus gain K_phi (eq. 4.7)")
+    p.add_argument("--k-v", type=float, help="speed gain K_v, m/s per rad (eq. 4.10)")
+    p.add_argument("--cycle-s", type=float, help="common patrol cycle period, s")
+    p.add_argument("--passes", type=int, help="passes per sweep of a segment")
     p.add_argument("--ns", help="run namespace (default: a fresh one per run)")
     p.add_argument("--no-report", action="store_true", help="skip the report at the end")
     p.add_argument("--quiet", action="store_true", help="no progress lines")

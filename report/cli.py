@@ -12,6 +12,7 @@ from report.load import LoadError, load_run
 from report.measures import steady_state
 from report.series import error_series
 from report.summary import (
+    CONVERGE_SMOOTH_S,
     PHASE_BAND_RAD,
     WORKLOAD_BAND_M2,
     compute_summary,
@@ -72,8 +73,9 @@ def report_markdown(
     lines += [
         "",
         f"Steady state: last quarter of the run; convergence bands {phase_band} rad and "
-        f"{workload_band} m^2 (max over pairs); revisit over the second half; "
-        "workload error from the true patrol depth.",
+        f"{workload_band} m^2 (max over pairs, averaged over the trailing "
+        f"{CONVERGE_SMOOTH_S:g} s); revisit over the second half, one visit per robot "
+        "sweep; workload error from the true patrol depth.",
         "",
         "![errors](errors.png)",
         "",
