@@ -23,10 +23,10 @@ from agent.phase import (
 
 @dataclass(frozen=True)
 class Gains:
-    k_s: float = 0.02  # boundary step per m^2 of workload error per tick (eq. 4.3)
+    k_s: float = 0.01  # boundary step per m^2 of workload error per tick (eq. 4.3)
     k_phi: float = 0.3  # phase consensus gain per tick (eq. 4.7); < 1/2 is stable for any n
-    k_v: float = 2.0  # forward speed per rad of phase lag, m/s/rad (eq. 4.10)
-    cycle_s: float = 150.0  # period of the common cycle: phi_dot_des = 2 pi / cycle_s
+    k_v: float = 5.0  # forward speed per rad of phase lag, m/s/rad (eq. 4.10)
+    cycle_s: float = 200.0  # period of the common cycle: phi_dot_des = 2 pi / cycle_s
     max_lead_rad: float = 1.0  # the desired phase stays this close to the actual one
     min_segment_m: float = 0.3
 

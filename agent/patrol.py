@@ -35,13 +35,14 @@ class PatrolConfig:
     min_depth_m: float = 0.3
     margin_out_m: float = 0.3
     max_depth_m: float = 5.0  # turn back regardless, in case a sensor fails
-    passes_per_sweep: int = 12
+    passes_per_sweep: int = 16
     min_turn_radius_m: float = 0.04
     max_turn_radius_m: float = 0.2
     heading_gain: float = 4.0  # curvature per rad of heading error, 1/m
     line_gain: float = 3.0  # heading correction per m off the pass line, rad/m
     max_curvature: float = 10.0  # 1/m
     bin_m: float = 0.1  # resolution of the depth map
+    end_inset_m: float = 0.05  # the last pass of a sweep stays this far inside the segment
 
     def __post_init__(self) -> None:
         if self.passes_per_sweep < 1:
@@ -54,15 +55,24 @@ class PatrolConfig:
 
 @dataclass
 class DepthMap:
-    """Patrol depth the robot measured at each bin along the edge (latest wins)."""
+    """Patrol depth the robot measured at each bin along the edge: the median of the
+    last ``keep`` samples, so one leg that strayed across a column boundary (and
+    measured its neighbour) does not move the workload, and a changed profile is
+    followed within two passes."""
 
     edge_lo: float
     bin_m: float
     default_m: float
+    keep: int = 3
     depths: dict[int, float] = field(default_factory=dict)
+    samples: dict[int, list[float]] = field(default_factory=dict)
 
     def record(self, s: float, depth: float) -> None:
-        self.depths[int(math.floor((s - self.edge_lo) / self.bin_m))] = depth
+        b = int(math.floor((s - self.edge_lo) / self.bin_m))
+        recent = self.samples.setdefault(b, [])
+        recent.append(depth)
+        del recent[: -self.keep]
+        self.depths[b] = sorted(recent)[len(recent) // 2]
 
     def average(self, lo: float, hi: float) -> float:
         """d_a over [lo, hi]: length-weighted mean of the measured profile, each bin
@@ -106,9 +116,14 @@ class Patrol:
         self.exit_y: float | None = None  # where it was left on the way out
         self.turn_sign = 0  # +1 left (counter-clockwise), -1 right
         self.turn_radius = config.max_turn_radius_m
+        self.sweeps = 0  # reversals so far
         self.turned = 0.0  # rotation so far in the current arc, rad
         self.prev_theta: float | None = None
         self.last_depth: float | None = None
+        self.prev_y: float | None = None
+        self.algae_depth: float | None = None  # deepest point of this leg with algae seen
+        self.out_algae_top: float | None = None  # where the out leg first saw algae
+        self.out_started_in_algae: bool | None = None
 
     def spacing(self, lo: float, hi: float) -> float:
         c = self.config
@@ -125,12 +140,19 @@ class Patrol:
             step = 2 * c.max_turn_radius_m
         else:
             nxt = self.line_x + self.direction * step
-            end = hi if self.direction > 0 else lo
-            room = abs(end - self.line_x)
+            # the last pass stops a little inside the end: exactly on the edge's end a
+            # robot wobbling off the ice's side would see 'no ice' under the ice
+            end = hi - c.end_inset_m if self.direction > 0 else lo + c.end_inset_m
+            room = max(0.0, (end - self.line_x) * self.direction)
             if (nxt > hi or nxt < lo) and room >= max(0.25 * step, 2 * c.min_turn_radius_m):
                 step = room  # a short last pass, so the sweep reaches the segment's end
             elif nxt > hi or nxt < lo:
                 self.direction = -self.direction
+                # The first pass of each sweep is shortened by a fraction that walks the
+                # golden-ratio sequence, so successive sweeps sample new columns of the
+                # depth profile instead of repeating the same pass lines.
+                self.sweeps += 1
+                step *= 0.3 + 0.7 * ((self.sweeps * 0.6180339887) % 1.0)
                 back = self.line_x + self.direction * step
                 if back > hi or back < lo:  # narrower than a pass: head for the middle
                     self.direction = 1 if self.line_x < 0.5 * (lo + hi) else -1
@@ -149,25 +171,57 @@ class Patrol:
         k = c.heading_gain * wrap_pi(desired - theta)
         return min(max(k, -c.max_curvature), c.max_curvature)
 
+    def _measure_on_the_way_out(self, x: float, y: float, prev_y: float | None,
+                                ice: bool, algae: bool) -> None:
+        """The out leg samples the depth profile too, on its own pass line: coming out
+        from the turn depth, algae first seen marks the extent there; algae from the
+        start only bounds it from below, and then nothing is recorded."""
+        mid = y if prev_y is None else 0.5 * (prev_y + y)
+        if self.out_started_in_algae is None:
+            self.out_started_in_algae = algae
+        if algae and self.out_algae_top is None:
+            self.out_algae_top = mid
+        if not ice and self.exit_y is None:
+            self.exit_y = mid
+            if not self.out_started_in_algae:
+                c = self.config
+                top = self.out_algae_top
+                depth = c.min_depth_m if top is None else max(c.min_depth_m, top - mid)
+                self.depth_map.record(x, depth)
+
+    def _measured_depth(self, depth: float, prev_y: float | None, y: float) -> float:
+        """The patrol depth of this pass: the minimum if algae ended before it, else
+        the middle of the last tick with algae and this first tick without."""
+        c = self.config
+        if depth >= c.max_depth_m:
+            return depth
+        if self.algae_depth is None or self.algae_depth < c.min_depth_m or prev_y is None:
+            return c.min_depth_m
+        return max(c.min_depth_m, 0.5 * (self.algae_depth + depth))
+
     def step(self, x: float, y: float, theta: float, ice: bool, algae: bool,
              lo: float, hi: float) -> Steer:
         c = self.config
         rotation = 0.0 if self.prev_theta is None else wrap_pi(theta - self.prev_theta)
         self.prev_theta = theta
+        prev_y, self.prev_y = self.prev_y, y
         if self.motion is Motion.ENTER:
             if ice:
-                self.entry_y = y
+                # The edge lies between this tick and the last one: take the middle.
+                self.entry_y = y if prev_y is None else 0.5 * (prev_y + y)
+                self.algae_depth = None
                 self.motion = Motion.UNDER
         if self.motion is Motion.UNDER:
             depth = y - (self.entry_y if self.entry_y is not None else y)
+            if algae:
+                self.algae_depth = depth
             if (depth >= c.min_depth_m and not algae) or depth >= c.max_depth_m:
-                self.last_depth = max(c.min_depth_m, depth)
-                self.depth_map.record(self.line_x, self.last_depth)
+                self.last_depth = self._measured_depth(depth, prev_y, y)
+                self.depth_map.record(x, self.last_depth)  # where it was measured
                 self._start_turn(lo, hi, heading_in=True)
                 self.motion = Motion.TURN_UNDER
         elif self.motion is Motion.EXIT:
-            if not ice and self.exit_y is None:
-                self.exit_y = y
+            self._measure_on_the_way_out(x, y, prev_y, ice, algae)
             if self.exit_y is not None and y <= self.exit_y - c.margin_out_m:
                 self._start_turn(lo, hi, heading_in=False)
                 self.motion = Motion.TURN_OUT
@@ -177,6 +231,8 @@ class Patrol:
                 if self.motion is Motion.TURN_UNDER:
                     self.motion = Motion.EXIT
                     self.exit_y = None
+                    self.out_algae_top = None
+                    self.out_started_in_algae = None
                 else:
                     self.motion = Motion.ENTER
                     self.entry_y = None

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import zenoh
 
+from agent.controller import Gains
 from agent.stability import check_gains
 from deploy.procs import Child, ProcessGroup, free_port
 from wire import AgentState, DecodeError, Keys, Tick, decode
@@ -120,8 +121,9 @@ def _fail(group: ProcessGroup, child: Child, what: str) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    problems = check_gains(args.robots, args.k_phi if args.k_phi is not None else 0.3,
-                           args.k_s if args.k_s is not None else 0.02, 2.0)
+    defaults = Gains()
+    problems = check_gains(args.robots, defaults.k_phi if args.k_phi is None else args.k_phi,
+                           defaults.k_s if args.k_s is None else args.k_s, 2.0)
     if problems:
         print("btrack sim: unstable gains: " + "; ".join(problems), file=sys.stderr)
         return 2

@@ -51,8 +51,9 @@ def test_agent_survives_garbage_and_counts_it(bus, tmp_path):
         alive.get(timeout=30)
 
         def tick(k: int) -> tuple[Cmd, AgentState]:
-            pub0.put(encode(neighbour_state(0, k - 1, 0.0, 2.0)))
-            pub2.put(encode(neighbour_state(2, k - 1, 4.0, 6.0)))
+            if k > 0:  # the neighbours' states of the previous tick
+                pub0.put(encode(neighbour_state(0, k - 1, 0.0, 2.0)))
+                pub2.put(encode(neighbour_state(2, k - 1, 4.0, 6.0)))
             session.put(keys.sense(1), encode(Sense(k * 0.1, k, 1, False, False, 0.0, 0.0,
                                                     0.0, 6.0, 0.1)))
             session.put(keys.pose(1), encode(Pose(k * 0.1, k, 1, 2.05, -1.0, math.pi / 2)))
