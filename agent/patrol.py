@@ -20,6 +20,9 @@ from enum import Enum
 from agent.phase import wrap_pi
 
 HALF_PI = 0.5 * math.pi
+FIRST_PASS_CANDIDATES = 24  # offsets tried for the first pass of a sweep
+FIRST_PASS_MIN, FIRST_PASS_SPAN = 0.3, 1.7  # its length, in passes: 0.3 to 2
+INTERIOR = 0.3  # a pass line within this fraction of a bin from its centre samples it
 
 
 class Motion(Enum):
@@ -66,13 +69,30 @@ class DepthMap:
     keep: int = 3
     depths: dict[int, float] = field(default_factory=dict)
     samples: dict[int, list[float]] = field(default_factory=dict)
+    recorded: int = 0  # samples recorded so far, over all bins
+    last_seen: dict[int, int] = field(default_factory=dict)  # bin -> ``recorded`` then
+
+    def bin_of(self, s: float) -> int:
+        return int(math.floor((s - self.edge_lo) / self.bin_m))
 
     def record(self, s: float, depth: float) -> None:
-        b = int(math.floor((s - self.edge_lo) / self.bin_m))
+        b = self.bin_of(s)
         recent = self.samples.setdefault(b, [])
         recent.append(depth)
         del recent[: -self.keep]
         self.depths[b] = sorted(recent)[len(recent) // 2]
+        self.recorded += 1
+        self.last_seen[b] = self.recorded
+
+    def staleness(self, s: float) -> int:
+        """Samples recorded elsewhere since the bin at ``s`` was last sampled; a bin
+        never sampled counts as staler than any sampled one. A line near a bin's side
+        counts for nothing: a leg there wobbles across two columns and measures neither."""
+        b = self.bin_of(s)
+        if abs(s - self.edge_lo - (b + 0.5) * self.bin_m) > INTERIOR * self.bin_m:
+            return 0
+        seen = self.last_seen.get(b)
+        return 10 * (self.recorded + 1) if seen is None else self.recorded - seen
 
     def average(self, lo: float, hi: float) -> float:
         """d_a over [lo, hi]: length-weighted mean of the measured profile, each bin
@@ -123,6 +143,7 @@ class Patrol:
         self.prev_y: float | None = None
         self.algae_depth: float | None = None  # deepest point of this leg with algae seen
         self.out_algae_top: float | None = None  # where the out leg first saw algae
+        self.out_algae_x: float | None = None  # and at which x
         self.out_started_in_algae: bool | None = None
 
     def spacing(self, lo: float, hi: float) -> float:
@@ -152,7 +173,7 @@ class Patrol:
                 # golden-ratio sequence, so successive sweeps sample new columns of the
                 # depth profile instead of repeating the same pass lines.
                 self.sweeps += 1
-                step *= 0.3 + 0.7 * ((self.sweeps * 0.6180339887) % 1.0)
+                step *= self._first_pass_fraction(lo, hi, step, heading_in)
                 back = self.line_x + self.direction * step
                 if back > hi or back < lo:  # narrower than a pass: head for the middle
                     self.direction = 1 if self.line_x < 0.5 * (lo + hi) else -1
@@ -161,6 +182,29 @@ class Patrol:
         # Heading +y, going +x is a right (clockwise) turn; heading -y it is a left one.
         self.turn_sign = -self.direction if heading_in else self.direction
         self.turned = 0.0
+
+    def _first_pass_fraction(self, lo: float, hi: float, step: float, heading_in: bool
+                             ) -> float:
+        """How much of a pass the first pass of a new sweep moves: of fractions in
+        [0.3, 1], the one whose in-legs (the sweep at the regular spacing) land on the
+        depth map's stalest bins, so that every column of the profile gets sampled
+        again within a sweep or two. Only in-legs count: an out-leg that starts inside
+        algae deeper than the last turn cannot measure it. Candidates start at the
+        golden-ratio walk, which breaks ties and keeps successive sweeps on new columns."""
+        golden = (self.sweeps * 0.6180339887) % 1.0
+        best, best_score = FIRST_PASS_MIN + FIRST_PASS_SPAN * golden, -1
+        for j in range(FIRST_PASS_CANDIDATES):
+            frac = FIRST_PASS_MIN + FIRST_PASS_SPAN * ((golden + j / FIRST_PASS_CANDIDATES) % 1)
+            score = 0
+            line = self.line_x + self.direction * frac * step
+            inward = not heading_in  # the leg after this turn goes in, or out
+            while lo <= line <= hi:
+                score += self.depth_map.staleness(line) if inward else 0
+                line += self.direction * step
+                inward = not inward
+            if score > best_score:
+                best, best_score = frac, score
+        return best
 
     def _hold_line(self, x: float, theta: float, heading: float) -> float:
         c = self.config
@@ -181,13 +225,16 @@ class Patrol:
             self.out_started_in_algae = algae
         if algae and self.out_algae_top is None:
             self.out_algae_top = mid
+            self.out_algae_x = x
         if not ice and self.exit_y is None:
             self.exit_y = mid
             if not self.out_started_in_algae:
                 c = self.config
                 top = self.out_algae_top
                 depth = c.min_depth_m if top is None else max(c.min_depth_m, top - mid)
-                self.depth_map.record(x, depth)
+                # where the algae was seen, if it was: the leg may have drifted since
+                self.depth_map.record(x if self.out_algae_x is None else self.out_algae_x,
+                                      depth)
 
     def _measured_depth(self, depth: float, prev_y: float | None, y: float) -> float:
         """The patrol depth of this pass: the minimum if algae ended before it, else
@@ -232,6 +279,7 @@ class Patrol:
                     self.motion = Motion.EXIT
                     self.exit_y = None
                     self.out_algae_top = None
+                    self.out_algae_x = None
                     self.out_started_in_algae = None
                 else:
                     self.motion = Motion.ENTER

@@ -135,3 +135,41 @@ def test_core_closed_loop_half_algae_errors_shrink():
         assert segs[0][0] == 0.0 and segs[-1][1] == 6.0
         assert all(lo < hi for lo, hi in segs)
         assert all(a[1] == b[0] for a, b in zip(segs, segs[1:], strict=False))
+
+
+def test_depth_map_staleness_prefers_unsampled_bins_and_ignores_bin_sides():
+    dm = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3)
+    dm.record(0.05, 0.5)
+    dm.record(0.25, 0.5)
+    assert dm.staleness(0.05) == 1 and dm.staleness(0.25) == 0
+    assert dm.staleness(0.15) > dm.staleness(0.05)  # never sampled beats any sampled
+    assert dm.staleness(0.101) == 0  # a pass on a bin's side samples neither bin
+
+
+def test_random_profile_every_column_of_each_segment_gets_measured():
+    """Sweeps place their in-legs on the stalest columns: after 900 s every bin of each
+    robot's segment that lies wholly inside it holds a measurement within 5 cm."""
+    gmap = load_map("random-algae", 0.05, 1)
+    world = World(gmap, 3, "in-phase", seed=1)
+    info = world.info()
+    e0, e1, depth = info["edge_lo"], info["edge_hi"], info["patrol_depth"]
+    ctrls = [Controller(i, *initial_segment(i, 3, e0, e1), e0, e1, world.truth(i)[0])
+             for i in range(3)]
+    published = [None, None, None]
+    for _ in range(9000):
+        outs = []
+        for i, c in enumerate(ctrls):
+            r = world.sense(i)
+            x, y, th = world.truth(i)
+            outs.append(c.step(0.1, x, y, th, r.ice, r.algae,
+                               published[i - 1] if i > 0 else None,
+                               published[i + 1] if i < 2 else None, i > 0, i < 2))
+        published = [c.published for c in ctrls]
+        world.step({i: (o.v, o.omega) for i, o in enumerate(outs)}, 0.1)
+    for c in ctrls:
+        dm = c.depth_map
+        whole = range(dm.bin_of(c.lo) + 1, dm.bin_of(c.hi))
+        missing = [b for b in whole if b not in dm.depths]
+        wrong = [(b, depth[b], dm.depths[b]) for b in whole
+                 if b in dm.depths and abs(dm.depths[b] - depth[b]) > 0.05]
+        assert not missing and len(wrong) <= 1, (c.robot, missing, wrong)
