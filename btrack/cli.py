@@ -15,6 +15,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "world": ("simworld.process", "the simulator: maps, kinematics, sensors, the clock"),
     "record": ("recorder.process", "record everything on the bus into an MCAP file"),
     "report": ("report.cli", "measures, summary.json and figures from a recorded run"),
+    "suite": ("deploy.suite", "the thesis's twelve cases, each a full team, and its tables"),
 }
 
 

@@ -1,5 +1,6 @@
-"""``btrack report DIR``: measures, summary.json, errors.png, map.png and report.md
-from DIR/run.mcap. ``make_report`` is the same for the launcher."""
+"""``btrack report DIR``: measures, summary.json, figures (errors.png, boundaries.png,
+map.png, revisit.png) and report.md from DIR/run.mcap. ``make_report`` is the same
+for the launcher."""
 
 from __future__ import annotations
 
@@ -10,13 +11,14 @@ from typing import Any
 
 from report.load import LoadError, load_run
 from report.measures import steady_state
-from report.series import error_series
+from report.series import error_series, time_grid
 from report.summary import (
     CONVERGE_SMOOTH_S,
     PHASE_BAND_RAD,
     WORKLOAD_BAND_M2,
     compute_summary,
     json_safe,
+    revisit,
     write_summary,
 )
 
@@ -79,9 +81,14 @@ def report_markdown(
         "",
         "![errors](errors.png)",
         "",
+        "![boundaries](boundaries.png)",
+        "",
         "![map](map.png)",
         "",
-        "Figures: [errors.png](errors.png), [map.png](map.png); numbers: "
+        "![revisit](revisit.png)",
+        "",
+        "Figures: [errors.png](errors.png), [boundaries.png](boundaries.png), "
+        "[map.png](map.png), [revisit.png](revisit.png); numbers: "
         "[summary.json](summary.json).",
         "",
     ]
@@ -95,15 +102,23 @@ def make_report(
 ) -> dict[str, Any]:
     """Write summary.json, errors.png, map.png and report.md into ``run_dir``; return the
     summary. Raises ``LoadError`` if run_dir/run.mcap is missing or unreadable."""
-    from report.figures import errors_figure, map_figure  # matplotlib only when drawing
+    from report.figures import (  # matplotlib only when drawing
+        boundaries_figure,
+        errors_figure,
+        map_figure,
+        revisit_figure,
+    )
 
     run_dir = Path(run_dir)
     run = load_run(run_dir / "run.mcap")
     series = error_series(run)
-    summary = compute_summary(run, series, phase_band, workload_band)
+    rev = revisit(run, time_grid(run))
+    summary = compute_summary(run, series, phase_band, workload_band, rev)
     write_summary(run_dir / "summary.json", summary)
     errors_figure(series, run_dir / "errors.png")
     map_figure(run, run_dir / "map.png")
+    boundaries_figure(run, run_dir / "boundaries.png")
+    revisit_figure(rev, run_dir / "revisit.png")
     agents_sse, agents_max = steady_state(series.t, series.workload_agents)
     extra = {
         "workload steady-state error, agents' own estimates (m^2)": json_safe(agents_sse),
@@ -117,7 +132,8 @@ def make_report(
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="btrack report",
-        description="Measures, summary.json, errors.png, map.png and report.md from DIR/run.mcap.",
+        description="Measures, summary.json, figures (errors, boundaries, map, revisit) and "
+        "report.md from DIR/run.mcap.",
     )
     parser.add_argument("dir", metavar="DIR", help="run directory holding run.mcap")
     parser.add_argument("--phase-band", type=float, default=PHASE_BAND_RAD, metavar="RAD")

@@ -1,5 +1,7 @@
-"""Figures of a recorded run: errors.png (errors per pair against time) and map.png
-(top-down view of water, ice, algae and the robots' tracks)."""
+"""Figures of a recorded run: errors.png (errors per pair against time, as thesis
+fig. 7.1), boundaries.png (each robot's segment against time), map.png (top-down view
+of water, ice, algae and the robots' tracks, as figs. 6.10 and 7.2) and revisit.png
+(time between visits along the edge)."""
 
 from __future__ import annotations
 
@@ -15,6 +17,7 @@ from matplotlib.patches import Patch, Rectangle  # noqa: E402
 
 from report.load import RunData  # noqa: E402
 from report.series import ErrorSeries  # noqa: E402
+from report.summary import Revisit  # noqa: E402
 
 WATER = "#3a7dc9"
 ICE = "#ffffff"
@@ -122,6 +125,58 @@ def map_figure(run: RunData, path: str | Path) -> None:
     ax.set_ylabel("y into the ice (m)")
     title = f"map {info.get('map', '?')}, start {info.get('start', '?')}: robot tracks (truth)"
     ax.set_title(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def boundaries_figure(run: RunData, path: str | Path) -> None:
+    """Each robot's segment [s_i, s_i+1] against time, as it published it."""
+    info = run.info
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for j, (robot, st) in enumerate(sorted(run.states.items())):
+        c = colours[j % len(colours)]
+        step = _thin(st.t.size)
+        ax.fill_between(st.t[step], st.lo[step], st.hi[step], color=c, alpha=0.25, lw=0,
+                        step="post", label=f"robot {robot}'s segment")
+        ax.plot(st.t[step], st.lo[step], color=c, lw=0.9, drawstyle="steps-post")
+        ax.plot(st.t[step], st.hi[step], color=c, lw=0.9, drawstyle="steps-post")
+    if "edge_lo" in info:
+        for end in (info["edge_lo"], info["edge_hi"]):
+            ax.axhline(float(end), color="black", lw=0.8, ls="--")
+    ax.set_title(f"Segments against time (map {info.get('map', '?')}, start "
+                 f"{info.get('start', '?')}): boundaries s_i move until workloads are equal")
+    ax.set_xlabel("simulation time (s)")
+    ax.set_ylabel("position along the edge (m)")
+    ax.grid(True, alpha=0.3)
+    if run.states:
+        ax.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def revisit_figure(rev: Revisit | None, path: str | Path) -> None:
+    """Mean and worst time between visits of points every 0.1 m along the edge, over
+    the second half of the run, against the ideal for the same team speed."""
+    fig, ax = plt.subplots(figsize=(10, 4))
+    if rev is not None:
+        mean, worst = rev.profile()
+        ax.plot(rev.points, worst, color="tab:red", lw=1.0, marker=".", label="worst")
+        ax.plot(rev.points, mean, color="tab:blue", lw=1.2, marker=".", label="mean")
+        if np.isfinite(rev.ideal_s):
+            ax.axhline(rev.ideal_s, color="black", ls="--", lw=1.0,
+                       label=f"ideal for this team speed ({rev.ideal_s:.0f} s)")
+        ax.set_ylim(0, 1.25 * max(float(np.nanmax(worst)), rev.ideal_s))
+        ax.set_title(f"Revisit time along the edge, {rev.t_from:.0f} s to {rev.t_to:.0f} s "
+                     "(one visit per robot sweep)")
+        ax.legend(loc="upper right", fontsize=8, ncol=3)
+    else:
+        ax.set_title("Revisit time along the edge: no tracks recorded")
+    ax.set_xlabel("position along the edge (m)")
+    ax.set_ylabel("time between visits (s)")
+    ax.grid(True, alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -245,6 +245,48 @@ def merge_visits(times: np.ndarray, merge_s: float) -> np.ndarray:
     return times[keep]
 
 
+def point_gaps(
+    points: np.ndarray,
+    visit_t: np.ndarray,
+    visit_x: np.ndarray,
+    radius: float,
+    t_from: float,
+    t_to: float,
+    merge_s: float = 1.0,
+    visit_group: np.ndarray | None = None,
+) -> list[np.ndarray | None]:
+    """For each point, the times between its consecutive visits in [t_from, t_to];
+    None for a point seen fewer than twice there. A visit is a crossing within
+    ``radius`` of the point; crossings of one point with the same ``visit_group`` (one
+    robot's one sweep along its segment) count as one visit, at the first."""
+    visit_t = np.asarray(visit_t, dtype=float)
+    visit_x = np.asarray(visit_x, dtype=float)
+    order = np.argsort(visit_t, kind="stable")
+    visit_t, visit_x = visit_t[order], visit_x[order]
+    groups = None if visit_group is None else np.asarray(visit_group)[order]
+    out: list[np.ndarray | None] = []
+    for p in np.asarray(points, dtype=float):
+        near = np.abs(visit_x - p) <= radius
+        times = visit_t[near]
+        if groups is not None and times.size:
+            _, first = np.unique(groups[near], return_index=True)
+            times = np.sort(times[first])
+        times = merge_visits(times, merge_s)
+        times = times[(times >= t_from) & (times <= t_to)]
+        out.append(np.diff(times) if times.size >= 2 else None)
+    return out
+
+
+def revisit_profile(
+    gaps: Sequence[np.ndarray | None], t_from: float, t_to: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and worst revisit time of each point; a point seen fewer than twice in the
+    window has no mean (NaN) and the whole window as its worst."""
+    mean = np.array([float(g.mean()) if g is not None else math.nan for g in gaps])
+    worst = np.array([float(g.max()) if g is not None else t_to - t_from for g in gaps])
+    return mean, worst
+
+
 def revisit_intervals(
     points: np.ndarray,
     visit_t: np.ndarray,
@@ -255,35 +297,14 @@ def revisit_intervals(
     merge_s: float = 1.0,
     visit_group: np.ndarray | None = None,
 ) -> tuple[float, float]:
-    """Mean and worst time between consecutive visits of each point, over visits in
-    [t_from, t_to]. A visit is a crossing within ``radius`` of the point; crossings of
-    one point with the same ``visit_group`` (one robot's one sweep along its segment)
-    count as one visit, at the first. A point seen fewer than twice in the window
+    """Mean (over every interval of every point) and worst time between consecutive
+    visits of the points (``point_gaps``). A point seen fewer than twice in the window
     counts the whole window as its worst interval."""
-    visit_t = np.asarray(visit_t, dtype=float)
-    visit_x = np.asarray(visit_x, dtype=float)
-    order = np.argsort(visit_t, kind="stable")
-    visit_t, visit_x = visit_t[order], visit_x[order]
-    groups = None if visit_group is None else np.asarray(visit_group)[order]
-    intervals: list[np.ndarray] = []
-    worst = math.nan
-    for p in np.asarray(points, dtype=float):
-        near = np.abs(visit_x - p) <= radius
-        times = visit_t[near]
-        if groups is not None and times.size:
-            _, first = np.unique(groups[near], return_index=True)
-            times = np.sort(times[first])
-        times = merge_visits(times, merge_s)
-        times = times[(times >= t_from) & (times <= t_to)]
-        if times.size < 2:
-            worst = max(t_to - t_from, worst) if math.isfinite(worst) else t_to - t_from
-            continue
-        gaps = np.diff(times)
-        intervals.append(gaps)
-        top = float(gaps.max())
-        worst = top if not math.isfinite(worst) else max(worst, top)
-    pooled = np.concatenate(intervals) if intervals else np.empty(0)
-    return nanmean(pooled), worst
+    gaps = point_gaps(points, visit_t, visit_x, radius, t_from, t_to, merge_s, visit_group)
+    known = [g for g in gaps if g is not None]
+    pooled = np.concatenate(known) if known else np.empty(0)
+    _, worst = revisit_profile(gaps, t_from, t_to)
+    return nanmean(pooled), nanmax(worst)
 
 
 def edge_points(edge_lo: float, edge_hi: float, step: float = 0.1) -> np.ndarray:

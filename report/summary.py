@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -74,11 +75,31 @@ def sweep_index(run: RunData, rid: int, at_t: np.ndarray) -> np.ndarray:
     return reversals[idx].astype(np.int64)
 
 
-def revisit(run: RunData, t: np.ndarray) -> tuple[float, float, float]:
-    """Mean, worst and ideal revisit time over the second half of the run."""
+@dataclass
+class Revisit:
+    """Revisit times along the edge over the second half of the run."""
+
+    points: np.ndarray  # positions along the edge, every POINT_STEP_M
+    gaps: list[np.ndarray | None]  # per point, the times between its visits
+    t_from: float
+    t_to: float
+    ideal_s: float
+
+    def profile(self) -> tuple[np.ndarray, np.ndarray]:
+        return m.revisit_profile(self.gaps, self.t_from, self.t_to)
+
+    def pooled(self) -> tuple[float, float]:
+        known = [g for g in self.gaps if g is not None]
+        mean = m.nanmean(np.concatenate(known)) if known else math.nan
+        return mean, m.nanmax(self.profile()[1]) if self.gaps else math.nan
+
+
+def revisit(run: RunData, t: np.ndarray) -> Revisit | None:
+    """Revisit times of points every 0.1 m along the edge, over the second half of the
+    run; one visit per robot sweep. None without truth, edge or time."""
     info = run.info
     if t.size < 2 or not run.truth or "edge_lo" not in info:
-        return math.nan, math.nan, math.nan
+        return None
     t_from, t_to = float(t[0] + 0.5 * (t[-1] - t[0])), float(t[-1])
     edge_lo, edge_hi = float(info["edge_lo"]), float(info["edge_hi"])
     radius = float(info.get("robot_radius", 0.17))
@@ -89,7 +110,7 @@ def revisit(run: RunData, t: np.ndarray) -> tuple[float, float, float]:
         visit_x.append(xc)
         visit_group.append(rid * 1_000_000 + sweep_index(run, rid, tc))
     points = m.edge_points(edge_lo, edge_hi, POINT_STEP_M)
-    mean, worst = m.revisit_intervals(
+    gaps = m.point_gaps(
         points,
         np.concatenate(visit_t),
         np.concatenate(visit_x),
@@ -100,7 +121,7 @@ def revisit(run: RunData, t: np.ndarray) -> tuple[float, float, float]:
         np.concatenate(visit_group),
     )
     rate = m.sweep_rate([(tr.t, tr.x) for tr in run.truth.values()], t_from, t_to)
-    return mean, worst, m.ideal_revisit(edge_hi - edge_lo, rate)
+    return Revisit(points, gaps, t_from, t_to, m.ideal_revisit(edge_hi - edge_lo, rate))
 
 
 def compute_summary(
@@ -108,8 +129,10 @@ def compute_summary(
     series: ErrorSeries | None = None,
     phase_band: float = PHASE_BAND_RAD,
     workload_band: float = WORKLOAD_BAND_M2,
+    rev: Revisit | None = None,
 ) -> dict[str, Any]:
-    """Every measure of the run, keyed as in ``KEYS`` (NaN where it cannot be computed)."""
+    """Every measure of the run, keyed as in ``KEYS`` (NaN where it cannot be computed).
+    ``rev``: the run's revisit times, if already computed."""
     s = error_series(run) if series is None else series
     info = run.info
     phase_sse, phase_max = m.steady_state(s.t, s.phase)
@@ -117,7 +140,9 @@ def compute_summary(
     work_sse, work_max = m.steady_state(s.t, s.workload)
     phase_conv = m.converge_time(s.t, s.phase, phase_band, CONVERGE_SMOOTH_S)
     work_conv = m.converge_time(s.t, s.workload, workload_band, CONVERGE_SMOOTH_S)
-    rev_mean, rev_worst, rev_ideal = revisit(run, time_grid(run))
+    rev = rev or revisit(run, time_grid(run))
+    rev_mean, rev_worst = rev.pooled() if rev else (math.nan, math.nan)
+    rev_ideal = rev.ideal_s if rev else math.nan
     out: dict[str, Any] = {
         "map": info.get("map"),
         "start": info.get("start"),

@@ -33,10 +33,11 @@ def test_report_writes_summary_figures_and_markdown(tmp_path: Path) -> None:
     assert done.returncode == 0, done.stderr
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert tuple(summary) == KEYS
-    for name in ("errors.png", "map.png"):
+    figures = ("errors.png", "boundaries.png", "map.png", "revisit.png")
+    for name in figures:
         assert (tmp_path / name).read_bytes()[:8] == PNG
     text = (tmp_path / "report.md").read_text()
-    assert "errors.png" in text and "map.png" in text
+    assert all(name in text for name in figures)
     assert summary["map"] == "synthetic" and summary["robots"] == 3
     assert summary["ticks"] == 601
     assert summary["invalid_messages"] == 3

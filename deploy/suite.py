@@ -1,0 +1,195 @@
+"""``btrack suite thesis``: the thesis's twelve simulated cases (tables 7.1, 7.2), each
+a full multi-process ``btrack sim`` run, several at once; then the two tables with
+the thesis's value beside ours in every cell, ``summary.json`` and ``report.md``.
+
+Every case is its own launcher process (in its own process group) that starts and
+ends its own world, recorder and agents; the suite ends the launchers it started on
+finish, on error and on Ctrl-C (each launcher then ends its children).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from report.thesis import MAPS, STARTS, all_cases
+
+DEFAULT_DURATION_S = 1200.0
+
+
+@dataclass
+class Case:
+    map: str
+    start: str
+    out: Path
+    proc: subprocess.Popen[bytes] | None = None
+    began: float = 0.0
+    wall_s: float = 0.0
+    code: int | None = None
+
+    @property
+    def name(self) -> str:
+        return f"{self.map}_{self.start.replace(':', '')}"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="btrack suite",
+        description="Run the thesis's twelve simulated cases (three maps x four starts, "
+        "tables 7.1 and 7.2), each a full multi-process team, and write the tables with "
+        "the thesis's value beside ours.",
+    )
+    p.add_argument("name", choices=["thesis"], help="the suite to run (thesis)")
+    p.add_argument("--out", type=Path, help="output directory (default runs/suite-<time>)")
+    p.add_argument("--localization", default=None,
+                   help="pose source for every case, as for btrack sim (default: btrack "
+                   "sim's own default)")
+    p.add_argument("--duration", type=float, default=DEFAULT_DURATION_S,
+                   help=f"simulated seconds per case (default {DEFAULT_DURATION_S:g}: "
+                   "steady state is the last quarter)")
+    p.add_argument("--seed", type=int, default=1, help="map and noise seed (default 1)")
+    p.add_argument("--jobs", type=int, default=default_jobs(),
+                   help=f"cases run at once (default {default_jobs()} on this machine: "
+                   "one per two cores, as a 3-robot team keeps about two cores busy)")
+    p.add_argument("--maps", nargs="+", choices=MAPS, default=list(MAPS),
+                   help="only these maps (default: all three)")
+    p.add_argument("--starts", nargs="+", choices=STARTS, default=list(STARTS),
+                   help="only these starts (default: all four)")
+    p.add_argument("--config", metavar="FILE.toml", help="agent configuration for every case")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    return p
+
+
+def default_jobs() -> int:
+    return max(1, (os.cpu_count() or 2) // 2)
+
+
+def _sim_args(args: argparse.Namespace, case: Case) -> list[str]:
+    out = [sys.executable, "-m", "btrack", "sim", "--robots", "3", "--map", case.map,
+           "--start", case.start, "--duration", repr(args.duration), "--seed",
+           str(args.seed), "--out", str(case.out), "--quiet"]
+    if args.localization:
+        out += ["--localization", args.localization]
+    if args.config:
+        out += ["--config", args.config]
+    return out
+
+
+def _start(args: argparse.Namespace, case: Case) -> None:
+    case.out.mkdir(parents=True, exist_ok=True)
+    with open(case.out / "sim.log", "wb") as log:
+        case.proc = subprocess.Popen(
+            _sim_args(args, case), stdin=subprocess.DEVNULL, stdout=log,
+            stderr=subprocess.STDOUT, start_new_session=True,
+        )
+    case.began = time.monotonic()
+
+
+def _stop(case: Case, grace_s: float = 30.0) -> None:
+    """Interrupt a case's launcher (it ends its own children), then kill it."""
+    proc = case.proc
+    if proc is None or proc.poll() is not None:
+        return
+    try:
+        os.kill(proc.pid, signal.SIGINT)
+        proc.wait(grace_s)
+    except subprocess.TimeoutExpired:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+    except ProcessLookupError:
+        pass
+
+
+def _case_summary(case: Case) -> dict[str, Any]:
+    from report.thesis import PHASE_SSE_RAD, WORKLOAD_SSE_M2, thesis_cell
+
+    path = case.out / "summary.json"
+    summary: dict[str, Any] = {"map": case.map, "start": case.start}
+    if case.code == 0 and path.exists():
+        summary = json.loads(path.read_text())
+    else:
+        summary["error"] = f"btrack sim exited with {case.code}; see {case.out / 'sim.log'}"
+    summary["thesis_phase_sse_rad"] = thesis_cell(PHASE_SSE_RAD, case.map, case.start)
+    summary["thesis_workload_sse_m2"] = thesis_cell(WORKLOAD_SSE_M2, case.map, case.start)
+    summary["wall_s"] = round(case.wall_s, 1)
+    summary["dir"] = case.out.name
+    return summary
+
+
+def _progress(case: Case, done: int, total: int, summary: dict[str, Any]) -> str:
+    head = f"[{done}/{total}] {case.map:<12} {case.start:<8} {case.wall_s:6.1f} s wall"
+    if "error" in summary:
+        return f"{head}  FAILED: {summary['error']}"
+    return (f"{head}  phase {summary['phase_sse_rad']:.4f} rad (thesis "
+            f"{summary['thesis_phase_sse_rad']:.3f})  workload {summary['workload_sse_m2']:.4f}"
+            f" m^2 (thesis {summary['thesis_workload_sse_m2']:.3f})")
+
+
+def run_cases(args: argparse.Namespace, cases: list[Case]) -> list[dict[str, Any]]:
+    """Run the cases, ``args.jobs`` at once; return their summaries in case order."""
+    waiting, running = list(cases), []
+    results: dict[str, dict[str, Any]] = {}
+    try:
+        while waiting or running:
+            while waiting and len(running) < max(1, args.jobs):
+                case = waiting.pop(0)
+                _start(args, case)
+                running.append(case)
+            time.sleep(0.2)
+            for case in [c for c in running if c.proc is not None and c.proc.poll() is not None]:
+                running.remove(case)
+                assert case.proc is not None
+                case.code = case.proc.returncode
+                case.wall_s = time.monotonic() - case.began
+                results[case.name] = _case_summary(case)
+                if not args.quiet:
+                    print(_progress(case, len(results), len(cases), results[case.name]),
+                          flush=True)
+    finally:
+        for case in running:
+            _stop(case)
+    return [results[c.name] for c in cases]
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    if args.jobs < 1 or not args.duration > 0:
+        print("btrack suite: --jobs must be at least 1 and --duration positive",
+              file=sys.stderr)
+        return 2
+    out: Path = args.out or Path("runs") / time.strftime("suite-%Y%m%d-%H%M%S")
+    out.mkdir(parents=True, exist_ok=True)
+    wanted = [(m, s) for m, s in all_cases() if m in args.maps and s in args.starts]
+    cases = [Case(m, s, out / f"{m}_{s.replace(':', '')}") for m, s in wanted]
+    if not args.quiet:
+        print(f"btrack suite thesis: {len(cases)} cases of {args.duration:g} s, {args.jobs} "
+              f"at once -> {out}", flush=True)
+    began = time.monotonic()
+    try:
+        summaries = run_cases(args, cases)
+    except KeyboardInterrupt:
+        print("\nbtrack suite: interrupted; every case stopped", file=sys.stderr)
+        return 130
+    wall = time.monotonic() - began
+
+    from report.suite import write_suite_report
+
+    below = write_suite_report(out, summaries, {
+        "suite": "thesis", "localization": args.localization or "default",
+        "duration_s": args.duration, "seed": args.seed, "jobs": args.jobs,
+        "wall_s": round(wall, 1),
+    })
+    failed = [s for s in summaries if "error" in s]
+    if not args.quiet:
+        print(f"btrack suite: {len(cases)} cases in {wall:.0f} s wall; "
+              f"{below} of {len(cases)} below the thesis in both tables; "
+              f"report {out / 'report.md'}")
+    return 1 if failed else 0

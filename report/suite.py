@@ -1,0 +1,112 @@
+"""The report of a suite of runs: ``summary.json`` (``{"cases": [...]}``), the thesis's
+tables with our value beside the thesis's in every cell (``report.md``) and a figure
+of both (``suite.png``)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+from report.summary import json_safe
+from report.thesis import PHASE_SSE_RAD, WORKLOAD_SSE_M2, below_thesis, thesis_table
+
+
+def write_suite_report(out: Path, cases: list[dict[str, Any]], settings: dict[str, Any]) -> int:
+    """Write out/summary.json, out/report.md and out/suite.png; return how many cases
+    are below the thesis in both tables."""
+    flags = [below_thesis(c) for c in cases]
+    below = sum(1 for p, w in flags if p and w)
+    doc = {**settings, "below_thesis": below, "cases": cases}
+    (out / "summary.json").write_text(json.dumps(json_safe(doc), indent=2, allow_nan=False)
+                                      + "\n")
+    suite_figure(cases, out / "suite.png")
+    (out / "report.md").write_text(suite_markdown(cases, settings, below))
+    return below
+
+
+def _ratio_range(cases: list[dict[str, Any]], key: str, thesis_key: str) -> str:
+    ratios = [c[thesis_key] / c[key] for c in cases
+              if isinstance(c.get(key), (int, float)) and c[key] > 0
+              and math.isfinite(c.get(thesis_key, math.nan))]
+    return f"{min(ratios):.1f}x to {max(ratios):.1f}x" if ratios else "n/a"
+
+
+def suite_markdown(cases: list[dict[str, Any]], settings: dict[str, Any], below: int) -> str:
+    lines = [
+        "# Thesis suite: tables 7.1 and 7.2, ours beside the thesis's",
+        "",
+        ", ".join(f"{k} {v}" for k, v in settings.items()),
+        "",
+        f"**{below} of {len(cases)} cases below the thesis in both tables.** Each cell: "
+        "our steady-state error / the thesis's (how many times ours is smaller). "
+        "Steady state is the mean |e| over neighbour pairs and the last quarter of the "
+        "run; the workload error uses the map's true patrol depth.",
+        "",
+    ]
+    lines += thesis_table(cases, "phase_sse_rad", PHASE_SSE_RAD,
+                          "Table 7.1: phase steady-state error (rad), position-based phase")
+    lines.append("")
+    lines += thesis_table(cases, "workload_sse_m2", WORKLOAD_SSE_M2,
+                          "Table 7.2: workload steady-state error (m^2)")
+    lines += [
+        "",
+        f"Phase: ours {_ratio_range(cases, 'phase_sse_rad', 'thesis_phase_sse_rad')} "
+        "below the thesis; workload: ours "
+        f"{_ratio_range(cases, 'workload_sse_m2', 'thesis_workload_sse_m2')} below.",
+        "",
+        "![ours against the thesis](suite.png)",
+        "",
+        "| case | phase, path length (rad) | phase max (rad) | workload max (m^2) | "
+        "converged after (s) | revisit mean / worst / ideal (s) | speed-up | wall (s) |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+
+    def f(value: Any, digits: int = 3) -> str:
+        return f"{value:.{digits}f}" if isinstance(value, (int, float)) else "n/a"
+
+    for c in cases:
+        name = f"[{c.get('map')} {c.get('start')}]({c.get('dir')}/report.md)"
+        if "error" in c:
+            lines.append(f"| {name} | {c['error']} | | | | | | |")
+            continue
+        lines.append(
+            f"| {name} | {f(c.get('phase_sse_path_rad'))} | {f(c.get('phase_max_rad'))} | "
+            f"{f(c.get('workload_max_m2'))} | {f(c.get('converge_s'), 0)} | "
+            f"{f(c.get('revisit_mean_s'), 0)} / {f(c.get('revisit_worst_s'), 0)} / "
+            f"{f(c.get('revisit_ideal_s'), 0)} | {f(c.get('speedup'), 0)}x | "
+            f"{f(c.get('wall_s'), 0)} |"
+        )
+    lines.append("")
+    return "\n".join(lines)
+
+
+def suite_figure(cases: list[dict[str, Any]], path: Path) -> None:
+    """Grouped bars, log scale: our steady-state errors beside the thesis's, per case."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    labels = [f"{c.get('map')}\n{c.get('start')}" for c in cases]
+    x = np.arange(len(cases))
+    fig, axes = plt.subplots(2, 1, figsize=(max(8, 1.1 * len(cases)), 7), sharex=True)
+    panels = (("phase_sse_rad", "thesis_phase_sse_rad", "phase steady-state error (rad)"),
+              ("workload_sse_m2", "thesis_workload_sse_m2",
+               "workload steady-state error (m^2)"))
+    for ax, (key, thesis_key, title) in zip(axes, panels, strict=True):
+        ours = [c.get(key) if isinstance(c.get(key), (int, float)) else np.nan for c in cases]
+        theirs = [c.get(thesis_key, np.nan) for c in cases]
+        ax.bar(x - 0.2, theirs, 0.4, label="thesis (tables 7.1, 7.2)", color="#bbbbbb")
+        ax.bar(x + 0.2, np.maximum(np.asarray(ours, dtype=float), 1e-5), 0.4, label="ours",
+               color="#1f77b4")
+        ax.set_yscale("log")
+        ax.set_title(title)
+        ax.grid(True, axis="y", alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+    axes[-1].set_xticks(x, labels, fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

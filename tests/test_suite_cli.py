@@ -1,0 +1,67 @@
+"""``btrack suite thesis`` through its command: a short suite of two cases, each a
+full multi-process team; the files it writes and the shape of the thesis's tables."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+from report.summary import KEYS
+from report.thesis import START_HEADINGS
+from tests.procutil import end, end_children_of_run, pid_alive
+
+
+def test_short_suite_writes_tables_summary_and_every_case(tmp_path: Path) -> None:
+    out = tmp_path / "suite"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "btrack", "suite", "thesis", "--out", str(out),
+         "--duration", "40", "--maps", "no-algae", "--starts", "in-phase", "ahead:1",
+         "--jobs", "2", "--localization", "truth"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+    )
+    case_dirs = [out / "no-algae_in-phase", out / "no-algae_ahead1"]
+    try:
+        stdout, stderr = proc.communicate(timeout=240)
+    finally:
+        end(proc)
+        for case in case_dirs:
+            end_children_of_run(case)
+    assert proc.returncode == 0, stderr[-3000:]
+    assert "[2/2]" in stdout and "report" in stdout
+
+    doc = json.loads((out / "summary.json").read_text())
+    assert doc["suite"] == "thesis" and doc["duration_s"] == 40
+    cases = doc["cases"]
+    assert [(c["map"], c["start"]) for c in cases] == [("no-algae", "in-phase"),
+                                                       ("no-algae", "ahead:1")]
+    for c in cases:
+        assert set(KEYS) <= set(c)
+        assert c["localization"] == "truth" and c["robots"] == 3
+        assert c["ticks"] == 400  # 40 s at 10 Hz, every tick recorded
+    # the thesis's cells: table 7.1 and 7.2, no algae, all in phase and robot 2 out
+    assert cases[0]["thesis_phase_sse_rad"] == 0.073
+    assert cases[1]["thesis_phase_sse_rad"] == 0.073
+    assert cases[0]["thesis_workload_sse_m2"] == 0.010
+    assert cases[1]["thesis_workload_sse_m2"] == 0.015
+
+    text = (out / "report.md").read_text()
+    assert "Table 7.1" in text and "Table 7.2" in text
+    for table in text.split("**Table 7.")[1:]:
+        rows = [line for line in table.splitlines() if line.startswith("|")]
+        header, rule, *body = rows
+        assert header.count("|") == len(START_HEADINGS) + 2
+        assert all(h in header for h in START_HEADINGS)
+        assert len(body) >= 1 and body[0].startswith("| no-algae |")
+        cells = [c.strip() for c in body[0].strip("|").split("|")][1:]
+        assert len(cells) == 4 and cells[0] and cells[2] and not cells[1] and not cells[3]
+        assert all(" / 0.0" in cells[i] for i in (0, 2))  # ours / thesis's
+    assert (out / "suite.png").read_bytes()[:4] == b"\x89PNG"
+
+    for case in case_dirs:
+        for name in ("run.mcap", "report.md", "errors.png", "boundaries.png", "map.png",
+                     "revisit.png"):
+            assert (case / name).exists(), case / name
+        pids = json.loads((case / "logs" / "pids.json").read_text())
+        assert not [n for n, pid in pids.items() if pid_alive(pid)]
