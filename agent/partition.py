@@ -46,3 +46,19 @@ def shared_boundary(
     down_room = max(0.0, 0.5 * (ref - lower.lo - min_len))
     up_room = max(0.0, 0.5 * (upper.hi - ref - min_len))
     return ref + min(max(move, -down_room), up_room)
+
+
+def join_segment(
+    lower: SegmentView | None, upper: SegmentView | None, edge_lo: float, edge_hi: float
+) -> tuple[float, float]:
+    """The first claim of a robot that joins a running team (a restart, or a new id)
+    between live neighbours ``lower`` and ``upper`` (None at an end of the chain): from
+    the middle of the lower neighbour's segment to the middle of the upper one's. Each
+    neighbour then meets it halfway (``shared_boundary``), so it starts with a quarter
+    of each neighbour's segment and workload balance evens the rest out; no robot
+    restarts. With no neighbour heard it claims the whole edge."""
+    lo = edge_lo if lower is None else 0.5 * (lower.lo + lower.hi)
+    hi = edge_hi if upper is None else 0.5 * (upper.lo + upper.hi)
+    if not lo < hi:  # neighbours' claims out of order: split what lies between them
+        lo, hi = min(lo, hi), max(lo, hi)
+    return lo, hi

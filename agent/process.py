@@ -9,7 +9,9 @@ are counted and dropped; nothing on the bus can kill it.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
+import os
 import queue
 import signal
 import sys
@@ -21,11 +23,13 @@ import zenoh
 
 from agent import config as agent_config
 from agent.controller import Controller, Neighbour, initial_segment
+from agent.partition import SegmentView, join_segment
 from agent.stability import check_gains
 from wire import AgentState, Cmd, DecodeError, Keys, Pose, Sense, decode, encode
 from wire.session import add_session_args, declare_publisher, open_session, options_from_args
 
 HISTORY = 8  # neighbour states kept per neighbour, by tick
+DEFAULT_LEASE_S = 1.0  # lease an agent announces unless told otherwise
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -67,6 +71,7 @@ class AgentNode:
         self.live: set[int] = set()
         self.states: dict[int, dict[int, AgentState]] = {}
         self.neighbour_subs: dict[int, Any] = {}
+        self.followed_at: dict[int, int] = {}  # our last tick when we began to hear it
         self.sense: Sense | None = None
         self.pose: Pose | None = None
         self.last_k = -1
@@ -117,10 +122,12 @@ class AgentNode:
         for rid in set(self.neighbour_subs) - wanted:
             self.neighbour_subs.pop(rid).undeclare()
             self.states.pop(rid, None)
+            self.followed_at.pop(rid, None)
         for rid in wanted - set(self.neighbour_subs):
             self.neighbour_subs[rid] = self.session.declare_subscriber(
                 self.keys.state(rid), self._on("state")
             )
+            self.followed_at[rid] = self.last_k
 
     def _handle(self, kind: str, data: Any) -> None:
         if kind == "alive":
@@ -163,9 +170,26 @@ class AgentNode:
         s = hist[max(ks)]
         return Neighbour(s.robot, s.lo, s.hi, s.phase_des, s.workload)
 
+    def _first_segment(self, k: int, edge_lo: float, edge_hi: float) -> tuple[float, float]:
+        """Equal initial segments when the team starts together (tick 0, or no
+        neighbour heard); otherwise a share of the live neighbours' segments."""
+        lower_id, upper_id = self.neighbours()
+        views = [self._neighbour_view(rid, k) for rid in (lower_id, upper_id)]
+        if k == 0 or all(v is None for v in views):
+            return initial_segment(self.robot, self.team, edge_lo, edge_hi)
+        lower, upper = (None if v is None else SegmentView(v.lo, v.hi, v.workload)
+                        for v in views)
+        return join_segment(lower, upper, edge_lo, edge_hi)
+
     def _neighbours_ready(self, k: int) -> bool:
+        """Whether every neighbour's state of tick k-1 is here. A neighbour we began to
+        hear only after our own tick k-1 (one that just became our neighbour) may have
+        published it before we listened: it is not waited for, and this tick acts on
+        what we have (the lockstep must not stall at every membership change)."""
         for rid in self.neighbours():
-            if rid is not None and (k - 1) not in self.states.get(rid, {}):
+            if rid is None or self.followed_at.get(rid, -1) >= k - 1:
+                continue
+            if (k - 1) not in self.states.get(rid, {}):
                 return False
         return True
 
@@ -207,7 +231,7 @@ class AgentNode:
         sense, pose = self.sense, self.pose
         assert sense is not None and pose is not None
         if self.controller is None:
-            lo, hi = initial_segment(self.robot, self.team, sense.edge_lo, sense.edge_hi)
+            lo, hi = self._first_segment(k, sense.edge_lo, sense.edge_hi)
             self.controller = Controller(
                 self.robot, lo, hi, sense.edge_lo, sense.edge_hi, pose.x,
                 self.gains, self.patrol_cfg, self.limits,
@@ -253,6 +277,9 @@ def main(argv: list[str] | None = None) -> int:
         print("btrack agent: unstable gains: " + "; ".join(problems), file=sys.stderr)
         return 2
     opts = options_from_args(args)
+    if opts.lease_s is None and not (opts.config_file or os.environ.get("ZENOH_CONFIG")):
+        # a robot's neighbours must notice within a second that it froze
+        opts = dataclasses.replace(opts, lease_s=DEFAULT_LEASE_S)
     with open_session(opts) as session:
         node = AgentNode(session, Keys(opts.ns), args.id, args.robots, gains, patrol, limits,
                          args.neighbour_timeout)

@@ -12,18 +12,22 @@ import argparse
 import json
 import math
 import os
+import signal
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import zenoh
 
 from agent.controller import Gains
 from agent.stability import check_gains
+from deploy import faults
 from deploy.procs import Child, ProcessGroup, free_port
-from wire import AgentState, DecodeError, Keys, Tick, decode
-from wire.session import SessionOptions, open_session
+from wire import AgentState, DecodeError, Keys, Tick, decode, encode
+from wire import Fault as WireFault
+from wire.session import SessionOptions, declare_publisher, open_session
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -51,6 +55,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--cycle-s", type=float, help="common patrol cycle period, s")
     p.add_argument("--passes", type=int, help="passes per sweep of a segment")
     p.add_argument("--ns", help="run namespace (default: a fresh one per run)")
+    p.add_argument("--fault", action="append", default=[], metavar="SPEC",
+                   help="inject a fault at a simulated time (repeatable): kill:I@T, "
+                   "restart:I@T (after a kill), freeze:I@T1-T2 (SIGSTOP, then SIGCONT), "
+                   "join:I@T (a new robot id joins the team)")
+    p.add_argument("--chaos", type=int, metavar="SEED",
+                   help="also kill and restart, freeze and thaw random agents at random "
+                   "times drawn from SEED")
     p.add_argument("--no-report", action="store_true", help="skip the report at the end")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     return p
@@ -101,8 +112,9 @@ class Monitor:
 
     def errors(self) -> tuple[float, float]:
         """Mean |phase error| and |workload error| over neighbour pairs, as the agents
-        themselves see them (the report measures against truth)."""
-        ids = sorted(self.states)
+        themselves see them (the report measures against truth); live agents only."""
+        live = set(self.tick.live) if self.tick else set(self.states)
+        ids = sorted(r for r in self.states if r in live)
         ep, ew = [], []
         for a, b in zip(ids, ids[1:], strict=False):
             sa, sb = self.states[a], self.states[b]
@@ -111,6 +123,82 @@ class Monitor:
             ew.append(abs(sb.workload - sa.workload))
         mean = lambda xs: sum(xs) / len(xs) if xs else float("nan")  # noqa: E731
         return mean(ep), mean(ew)
+
+
+class Injector:
+    """Carries out the fault schedule: the tick callback only notes the time and wakes
+    the launcher's loop, which signals, starts and announces (Fault on the bus, for the
+    recording) from its own thread."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys, schedule: list[faults.Fault],
+                 group: ProcessGroup, agent_args: Callable[[int], list[str]]):
+        self.schedule = schedule
+        self.done = 0
+        self.group = group
+        self.agent_args = agent_args
+        self.agents: dict[int, Child] = {}
+        self.gone: set[int] = set()  # pids killed on purpose: not a failure
+        self.starts: dict[int, int] = {}
+        self.t = 0.0
+        self.wake = threading.Event()
+        self.pub = declare_publisher(session, keys.fault())
+        self._next_at = schedule[0].at_s if schedule else math.inf
+        self._sub = session.declare_subscriber(keys.world_tick(), self._on_tick)
+
+    def _on_tick(self, sample: zenoh.Sample) -> None:
+        try:
+            t = decode(Tick, sample.payload.to_bytes()).t
+        except DecodeError:
+            return
+        self.t = max(self.t, t)
+        if t >= self._next_at:
+            self.wake.set()
+
+    def start_agent(self, agent: int) -> Child:
+        n = self.starts.get(agent, 0)
+        self.starts[agent] = n + 1
+        name = f"agent{agent}" if n == 0 else f"agent{agent}.{n}"
+        child = self.group.start(name, self.agent_args(agent))
+        self.agents[agent] = child
+        return child
+
+    def fire_due(self) -> list[str]:
+        """Carry out every fault that is due; return a line for each."""
+        self.wake.clear()
+        lines = []
+        for f in faults.due(self.schedule, self.done, self.t):
+            self.done += 1
+            child = self.agents.get(f.agent)
+            if f.kind in ("restart", "join"):
+                child = self.start_agent(f.agent)
+            elif child is not None and child.alive():
+                sig = {"kill": signal.SIGKILL, "freeze": signal.SIGSTOP,
+                       "thaw": signal.SIGCONT}[f.kind]
+                os.kill(child.pid, sig)
+                if f.kind == "kill":
+                    self.gone.add(child.pid)
+            pid = child.pid if child is not None else 0
+            self.pub.put(encode(WireFault(self.t, f.kind, f.agent, pid)))
+            lines.append(f"t = {self.t:7.1f} s: {f.kind} agent {f.agent} (pid {pid}), "
+                         f"scheduled at {f.at_s:g} s")
+        self._next_at = (self.schedule[self.done].at_s if self.done < len(self.schedule)
+                         else math.inf)
+        return lines
+
+    def unexpected_exit(self) -> Child | None:
+        for child in self.agents.values():
+            if child.pid not in self.gone and not child.alive():
+                return child
+        return None
+
+
+def _schedule(args: argparse.Namespace) -> tuple[list[faults.Fault], int]:
+    """The run's fault schedule and the number of robot bodies the world needs."""
+    schedule = [f for spec in args.fault for f in faults.parse_fault(spec)]
+    if args.chaos is not None:
+        schedule += faults.chaos_schedule(args.chaos, args.robots, args.duration)
+    schedule.sort()
+    return schedule, faults.check_schedule(schedule, args.robots)
 
 
 def _fail(group: ProcessGroup, child: Child, what: str) -> int:
@@ -127,14 +215,20 @@ def run(args: argparse.Namespace) -> int:
     if problems:
         print("btrack sim: unstable gains: " + "; ".join(problems), file=sys.stderr)
         return 2
+    try:
+        schedule, bodies = _schedule(args)
+    except faults.FaultSpecError as exc:
+        print(f"btrack sim: {exc}", file=sys.stderr)
+        return 2
     out: Path = args.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
     out.mkdir(parents=True, exist_ok=True)
     ns = args.ns or f"btrack/sim-{os.getpid()}-{int(time.time() * 1000) % 10**9}"
     keys = Keys(ns)
     port = free_port()
-    hub = SessionOptions(ns=ns, mode="peer", listen=(f"tcp/127.0.0.1:{port}",), multicast=False)
-    member = SessionOptions(ns=ns, mode="peer", connect=(f"tcp/127.0.0.1:{port}",),
-                            listen=("tcp/127.0.0.1:0",), multicast=False).to_args()
+    hub = SessionOptions(ns=ns, mode="router", listen=(f"tcp/127.0.0.1:{port}",),
+                         multicast=False)
+    member = SessionOptions(ns=ns, mode="client", connect=(f"tcp/127.0.0.1:{port}",),
+                            multicast=False).to_args()
     group = ProcessGroup(out / "logs")
     print(f"btrack sim: {args.robots} robots, map {args.map}, start {args.start}, "
           f"localization {args.localization}, {args.duration:g} s simulated -> {out}")
@@ -148,19 +242,26 @@ def run(args: argparse.Namespace) -> int:
                     return _fail(group, recorder, "failed to start")
                 if time.monotonic() - t_wall0 > 60:
                     return _fail(group, recorder, "did not come up within 60 s")
-            agents = [
-                group.start(f"agent{i}", ["agent", "--id", str(i), "--robots", str(args.robots),
-                                          *_agent_args(args), *member])
-                for i in range(args.robots)
-            ]
-            world_args = ["world", "--robots", str(args.robots), "--map", args.map,
+            def agent_args(i: int) -> list[str]:
+                team = args.robots if i < args.robots else bodies
+                return ["agent", "--id", str(i), "--robots", str(team), *_agent_args(args),
+                        *member]
+
+            injector = Injector(session, keys, schedule, group, agent_args)
+            for i in range(args.robots):
+                injector.start_agent(i)
+            if schedule and not args.quiet:
+                print("btrack sim: faults: " + ", ".join(
+                    f"{f.kind}:{f.agent}@{f.at_s:g}" for f in schedule))
+            world_args = ["world", "--robots", str(bodies), "--team", str(args.robots),
+                          "--map", args.map,
                           "--scale", str(args.scale), "--start", args.start,
                           "--localization", args.localization, "--duration", str(args.duration),
                           "--seed", str(args.seed), "--wait-recorder", *member]
             if args.realtime:
                 world_args.append("--realtime")
             world = group.start("world", world_args)
-            code = _watch(args, group, monitor, world, agents, recorder)
+            code = _watch(args, group, monitor, world, injector, recorder)
             if code:
                 return code
             try:
@@ -187,19 +288,22 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _watch(args: argparse.Namespace, group: ProcessGroup, monitor: Monitor, world: Child,
-           agents: list[Child], recorder: Child) -> int:
-    """Show progress until the world ends; fail fast if a process dies."""
+           injector: Injector, recorder: Child) -> int:
+    """Show progress and inject faults until the world ends; fail fast if a process
+    dies that was not killed on purpose."""
     last_print = time.monotonic()
     last_t, last_wall = 0.0, time.monotonic()
     tty = sys.stdout.isatty()
     while world.alive():
-        try:
-            world.proc.wait(0.5)
-        except Exception:
-            pass
-        for child in (*agents, recorder):
-            if not child.alive():
-                return _fail(group, child, "exited early")
+        if injector.wake.wait(0.2):
+            for line in injector.fire_due():
+                if not args.quiet:
+                    print(("\n" if tty else "") + "btrack sim: " + line, flush=True)
+        if world.proc.poll() is not None:
+            break
+        dead = injector.unexpected_exit() or (None if recorder.alive() else recorder)
+        if dead is not None:
+            return _fail(group, dead, "exited early")
         monitor.drain()
         now = time.monotonic()
         if not args.quiet and monitor.tick and now - last_print >= (1.0 if tty else 5.0):

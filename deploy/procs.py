@@ -87,6 +87,7 @@ class ProcessGroup:
             if child.alive():
                 try:
                     os.kill(child.pid, signal.SIGTERM)
+                    os.kill(child.pid, signal.SIGCONT)  # a frozen child must wake to end
                 except ProcessLookupError:
                     pass
         deadline = time.monotonic() + grace_s

@@ -41,6 +41,7 @@ ROWS = (
     ("speedup", "speed-up (simulated / wall time)"),
     ("ticks", "ticks recorded"),
     ("invalid_messages", "invalid messages"),
+    ("coverage_gap_m_s", "edge owned by no live agent, integrated (m s)"),
 )
 
 
@@ -95,6 +96,35 @@ def report_markdown(
     return "\n".join(lines)
 
 
+def faults_markdown(faults: list[dict[str, Any]]) -> str:
+    """The table of injected faults, or nothing for a run without any."""
+    if not faults:
+        return ""
+    lines = [
+        "",
+        "## Faults",
+        "",
+        "| fault | at (s) | detected (s) | took (s sim / s wall) | edge unowned (m s) | "
+        "workload rebalanced after (s) |",
+        "| --- | --- | --- | --- | --- | --- |",
+    ]
+    for f in faults:
+        lines.append(
+            f"| {f['kind']} agent {f['agent']} | {_fmt(f['at_s'])} | {_fmt(f['detected_s'])} "
+            f"| {_fmt(f['detection_s'])} / {_fmt(f['detection_wall_s'])} | "
+            f"{_fmt(f['coverage_gap_m_s'])} | {_fmt(f['rebalanced_s'])} |"
+        )
+    lines += [
+        "",
+        "Detected: when the other agents' published neighbours first reflect the fault. "
+        "Edge unowned: length of edge in no live agent's segment, integrated from the "
+        "fault to the next one. Rebalanced: until the worst workload error over neighbour "
+        "pairs (10 s average) is back within its band for good (up to the next fault).",
+        "",
+    ]
+    return "\n".join(lines)
+
+
 def make_report(
     run_dir: str | Path,
     phase_band: float = PHASE_BAND_RAD,
@@ -115,7 +145,7 @@ def make_report(
     rev = revisit(run, time_grid(run))
     summary = compute_summary(run, series, phase_band, workload_band, rev)
     write_summary(run_dir / "summary.json", summary)
-    errors_figure(series, run_dir / "errors.png")
+    errors_figure(series, run_dir / "errors.png", run)
     map_figure(run, run_dir / "map.png")
     boundaries_figure(run, run_dir / "boundaries.png")
     revisit_figure(rev, run_dir / "revisit.png")
@@ -125,6 +155,7 @@ def make_report(
         "workload error, agents' own, max over last quarter (m^2)": json_safe(agents_max),
     }
     markdown = report_markdown(summary, phase_band, workload_band, extra)
+    markdown += faults_markdown(summary.get("faults") or [])
     (run_dir / "report.md").write_text(markdown)
     return summary
 

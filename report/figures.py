@@ -16,7 +16,8 @@ import numpy as np  # noqa: E402
 from matplotlib.patches import Patch, Rectangle  # noqa: E402
 
 from report.load import RunData  # noqa: E402
-from report.series import ErrorSeries  # noqa: E402
+from report.measures import hold  # noqa: E402
+from report.series import ErrorSeries, live_matrix, time_grid  # noqa: E402
 from report.summary import Revisit  # noqa: E402
 
 WATER = "#3a7dc9"
@@ -29,7 +30,7 @@ def _thin(n: int) -> slice:
     return slice(None, None, max(1, n // MAX_POINTS))
 
 
-def errors_figure(series: ErrorSeries, path: str | Path) -> None:
+def errors_figure(series: ErrorSeries, path: str | Path, run: RunData | None = None) -> None:
     """Phase error and workload error per neighbour pair against time, two panels."""
     fig, (ax_phase, ax_work) = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
     t = series.t
@@ -67,6 +68,8 @@ def errors_figure(series: ErrorSeries, path: str | Path) -> None:
     ax_work.set_ylabel("workload error (m^2)")
     ax_work.set_xlabel("simulation time (s)")
     for ax in (ax_phase, ax_work):
+        if run is not None:
+            _mark_faults(ax, run)
         ax.axhline(0.0, color="grey", lw=0.6)
         ax.grid(True, alpha=0.3)
         if series.pairs:
@@ -130,27 +133,43 @@ def map_figure(run: RunData, path: str | Path) -> None:
     plt.close(fig)
 
 
+def _mark_faults(ax: plt.Axes, run: RunData) -> None:
+    """A dotted vertical line at each injected fault, labelled."""
+    for f in run.faults:
+        ax.axvline(float(f["t"]), color="red", lw=0.8, ls=":")
+        ax.annotate(f"{f['kind']} {f['agent']}", (float(f["t"]), 1.0),
+                    xycoords=("data", "axes fraction"), rotation=90, va="top", ha="right",
+                    fontsize=7, color="red")
+
+
 def boundaries_figure(run: RunData, path: str | Path) -> None:
-    """Each robot's segment [s_i, s_i+1] against time, as it published it."""
+    """Each live robot's segment [s_i, s_i+1] against time, as it published it."""
     info = run.info
     fig, ax = plt.subplots(figsize=(10, 4.5))
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    for j, (robot, st) in enumerate(sorted(run.states.items())):
+    ids = sorted(run.states)
+    t = time_grid(run)
+    live = live_matrix(run, t, ids)
+    step = _thin(t.size)
+    for j, robot in enumerate(ids):
+        st = run.states[robot]
         c = colours[j % len(colours)]
-        step = _thin(st.t.size)
-        ax.fill_between(st.t[step], st.lo[step], st.hi[step], color=c, alpha=0.25, lw=0,
-                        step="post", label=f"robot {robot}'s segment")
-        ax.plot(st.t[step], st.lo[step], color=c, lw=0.9, drawstyle="steps-post")
-        ax.plot(st.t[step], st.hi[step], color=c, lw=0.9, drawstyle="steps-post")
+        lo = np.where(live[j], hold(st.t, st.lo, t), np.nan)[step]
+        hi = np.where(live[j], hold(st.t, st.hi, t), np.nan)[step]
+        ax.fill_between(t[step], lo, hi, color=c, alpha=0.25, lw=0,
+                        label=f"robot {robot}'s segment")
+        ax.plot(t[step], lo, color=c, lw=0.9)
+        ax.plot(t[step], hi, color=c, lw=0.9)
     if "edge_lo" in info:
         for end in (info["edge_lo"], info["edge_hi"]):
             ax.axhline(float(end), color="black", lw=0.8, ls="--")
-    ax.set_title(f"Segments against time (map {info.get('map', '?')}, start "
-                 f"{info.get('start', '?')}): boundaries s_i move until workloads are equal")
+    _mark_faults(ax, run)
+    ax.set_title(f"Segments of the live robots against time (map {info.get('map', '?')}, "
+                 f"start {info.get('start', '?')})")
     ax.set_xlabel("simulation time (s)")
     ax.set_ylabel("position along the edge (m)")
     ax.grid(True, alpha=0.3)
-    if run.states:
+    if ids:
         ax.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)

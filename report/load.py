@@ -11,7 +11,8 @@ from typing import Any
 import numpy as np
 from mcap.reader import make_reader
 
-STATE_FIELDS = ("t", "lo", "hi", "phase", "phase_des", "workload", "depth_avg", "direction")
+STATE_FIELDS = ("t", "lo", "hi", "phase", "phase_des", "workload", "depth_avg", "direction",
+                "lower", "upper")
 TRUTH_FIELDS = ("t", "x", "y", "theta")
 
 
@@ -41,6 +42,8 @@ class States:
     workload: np.ndarray
     depth_avg: np.ndarray
     direction: np.ndarray
+    lower: np.ndarray  # the neighbour ids it named, -1 for none
+    upper: np.ndarray
 
 
 @dataclass
@@ -48,6 +51,8 @@ class RunData:
     info: dict[str, Any]  # the last WorldInfo, {} if none was recorded
     tick_t: np.ndarray  # simulation time of each tick
     tick_log_ns: np.ndarray  # wall clock (ns) at which the recorder received each tick
+    tick_live: list[list[int]] = field(default_factory=list)  # the world's live agents
+    faults: list[dict[str, Any]] = field(default_factory=list)  # Fault messages, by time
     truth: dict[int, Truth] = field(default_factory=dict)
     states: dict[int, States] = field(default_factory=dict)
     invalid: int = 0
@@ -78,6 +83,8 @@ def load_run(path: str | Path) -> RunData:
         raise LoadError(f"no recording at {path}")
     info: dict[str, Any] = {}
     ticks: list[tuple[float, int]] = []
+    live: list[list[int]] = []
+    faults: list[dict[str, Any]] = []
     truth: dict[int, list[tuple[float, ...]]] = defaultdict(list)
     states: dict[int, list[tuple[float, ...]]] = defaultdict(list)
     alive: dict[int, list[tuple[int, bool]]] = defaultdict(list)
@@ -93,6 +100,10 @@ def load_run(path: str | Path) -> RunData:
                 if topic == "world/tick":
                     msg = json.loads(message.data)
                     ticks.append((msg["t"], message.log_time))
+                    live.append(sorted(int(r) for r in msg.get("live", [])))
+                elif topic == "fault":
+                    msg = json.loads(message.data)
+                    faults.append({**msg, "log_ns": message.log_time})
                 elif topic.endswith("/truth"):
                     msg = json.loads(message.data)
                     truth[int(msg["robot"])].append((msg["t"], msg["x"], msg["y"], msg["theta"]))
@@ -119,6 +130,8 @@ def load_run(path: str | Path) -> RunData:
         info=info,
         tick_t=tick_arr[order, 0].copy(),
         tick_log_ns=tick_log,
+        tick_live=[live[i] for i in order],
+        faults=sorted(faults, key=lambda f: (f["t"], f["log_ns"])),
         truth={r: Truth(**_columns(rows, TRUTH_FIELDS)) for r, rows in truth.items()},
         states={r: States(**_columns(rows, STATE_FIELDS)) for r, rows in states.items()},
         invalid=invalid,

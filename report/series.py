@@ -14,7 +14,7 @@ from report.load import RunData
 @dataclass
 class ErrorSeries:
     t: np.ndarray  # simulation time of each sample (the ticks), s
-    pairs: list[tuple[int, int]]  # neighbour pairs (i, i+1), one row per pair below
+    pairs: list[tuple[int, int]]  # neighbour pairs (live ids next to each other), a row each
     phase: np.ndarray  # e_phi with the position-based phase (eq. 3.1), rad
     phase_path: np.ndarray  # e_phi with the path-length phase, rad
     workload: np.ndarray  # e_Psi with the true workload (true patrol depth), m^2
@@ -35,11 +35,44 @@ def max_age_s(run: RunData) -> float:
     return max(10.0 * dt, 1.0)
 
 
+def live_matrix(run: RunData, t: np.ndarray, ids: list[int]) -> np.ndarray:
+    """live[j, k]: robot ids[j] is in the team at t[k]: in the world's live list of that
+    tick (Zenoh liveliness) and with a recent state. Without ticks, a recent state."""
+    age = max_age_s(run)
+    live = np.zeros((len(ids), t.size), dtype=bool)
+    for j, rid in enumerate(ids):
+        st = run.states.get(rid)
+        if st is not None:
+            live[j] = np.isfinite(m.hold(st.t, st.lo, t, age))
+    if run.tick_live and len(run.tick_live) == run.tick_t.size and t.size:
+        idx = np.clip(np.searchsorted(run.tick_t, t, side="right") - 1, 0, run.tick_t.size - 1)
+        for j, rid in enumerate(ids):
+            in_tick = np.fromiter((rid in run.tick_live[i] for i in idx), bool, idx.size)
+            live[j] &= in_tick
+    return live
+
+
+def active_pairs(ids: list[int], live: np.ndarray) -> tuple[list[tuple[int, int]], np.ndarray]:
+    """Neighbour pairs over time: (a, b) is a pair while both are live and no live id
+    lies between them (a robot that left makes its two neighbours a pair). Returns the
+    pairs that ever occur and active[p, k]."""
+    pairs, rows = [], []
+    for ja in range(len(ids)):
+        between = np.zeros(live.shape[1], dtype=bool)
+        for jb in range(ja + 1, len(ids)):
+            active = live[ja] & live[jb] & ~between
+            if active.any():
+                pairs.append((ids[ja], ids[jb]))
+                rows.append(active)
+            between |= live[jb]
+    return pairs, np.array(rows, dtype=bool).reshape(len(rows), live.shape[1])
+
+
 def error_series(run: RunData) -> ErrorSeries:
     t = time_grid(run)
     age = max_age_s(run)
     ids = sorted(set(run.truth) & set(run.states))
-    pairs = m.neighbour_pairs(ids)
+    pairs, active = active_pairs(ids, live_matrix(run, t, ids))
     depth = run.info.get("patrol_depth") or []
     edge_lo = float(run.info.get("edge_lo", 0.0))
     bin_m = float(run.info.get("bin_m") or 0.1)
@@ -68,7 +101,7 @@ def error_series(run: RunData) -> ErrorSeries:
     def errors(values: dict[int, np.ndarray], wrap: bool) -> np.ndarray:
         if not pairs:
             return np.empty((0, t.size))
-        return m.pair_errors(values, pairs, wrap)
+        return np.where(active, m.pair_errors(values, pairs, wrap), np.nan)
 
     return ErrorSeries(
         t=t,

@@ -30,7 +30,10 @@ def _ratio_range(cases: list[dict[str, Any]], key: str, thesis_key: str) -> str:
     ratios = [c[thesis_key] / c[key] for c in cases
               if isinstance(c.get(key), (int, float)) and c[key] > 0
               and math.isfinite(c.get(thesis_key, math.nan))]
-    return f"{min(ratios):.1f}x to {max(ratios):.1f}x" if ratios else "n/a"
+    if not ratios:
+        return "n/a"
+    top = max(ratios)
+    return f"{min(ratios):.1f}x to " + (">1000x" if top > 1000 else f"{top:.1f}x")
 
 
 def suite_markdown(cases: list[dict[str, Any]], settings: dict[str, Any], below: int) -> str:

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from report import measures as m
+from report.faults import coverage, fault_measures
 from report.load import RunData
 from report.series import ErrorSeries, error_series, time_grid
 
@@ -45,6 +46,8 @@ KEYS = (
     "workload_q4_m2",
     "ticks",
     "invalid_messages",
+    "coverage_gap_m_s",
+    "faults",
 )
 
 
@@ -124,6 +127,13 @@ def revisit(run: RunData, t: np.ndarray) -> Revisit | None:
     return Revisit(points, gaps, t_from, t_to, m.ideal_revisit(edge_hi - edge_lo, rate))
 
 
+def _integral(t: np.ndarray, values: np.ndarray) -> float:
+    """Integral over time of a per-tick value held until the next tick (NaN as 0)."""
+    if t.size < 2:
+        return 0.0
+    return float(np.sum(np.nan_to_num(values[:-1]) * np.diff(t)))
+
+
 def compute_summary(
     run: RunData,
     series: ErrorSeries | None = None,
@@ -141,6 +151,7 @@ def compute_summary(
     phase_conv = m.converge_time(s.t, s.phase, phase_band, CONVERGE_SMOOTH_S)
     work_conv = m.converge_time(s.t, s.workload, workload_band, CONVERGE_SMOOTH_S)
     rev = rev or revisit(run, time_grid(run))
+    gap, _ = coverage(run, s.t)
     rev_mean, rev_worst = rev.pooled() if rev else (math.nan, math.nan)
     rev_ideal = rev.ideal_s if rev else math.nan
     out: dict[str, Any] = {
@@ -168,6 +179,8 @@ def compute_summary(
         "workload_q4_m2": m.window_abs(s.t, s.workload, 0.75, 1.0)[0],
         "ticks": int(run.tick_t.size),
         "invalid_messages": int(run.invalid),
+        "coverage_gap_m_s": _integral(s.t, gap),
+        "faults": fault_measures(run, s, gap, workload_band, CONVERGE_SMOOTH_S),
     }
     assert tuple(out) == KEYS
     return json_safe(out)

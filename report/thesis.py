@@ -49,7 +49,7 @@ def _cell(ours: Any, theirs: float) -> str:
     if not isinstance(ours, (int, float)) or not math.isfinite(ours):
         return f"failed / {theirs:.3f}"
     ratio = theirs / ours if ours > 0 else math.inf
-    ratio_text = "inf" if math.isinf(ratio) else f"{ratio:.1f}"
+    ratio_text = ">1000" if ratio > 1000 else f"{ratio:.1f}"
     mark = "" if ours < theirs else " **not below**"
     return f"{ours:.4f} / {theirs:.3f} ({ratio_text}x){mark}"
 

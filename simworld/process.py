@@ -50,6 +50,9 @@ def build_parser() -> argparse.ArgumentParser:
         prog="btrack world", description="The simulator: maps, kinematics, sensors, the clock."
     )
     p.add_argument("--robots", type=int, default=3, help="number of robots (default 3)")
+    p.add_argument("--team", type=int,
+                   help="how many of them (ids 0..TEAM-1) start on the start line; the rest "
+                   "wait behind it until their agent joins (default: all)")
     p.add_argument(
         "--map",
         default="half-algae",
@@ -118,6 +121,7 @@ class WorldProcess:
         self.args = args
         self.world = world
         self.n = world.n
+        self.team = set(range(args.team if args.team else world.n))
         self.dt = float(args.dt)
         self.keys = Keys(args.ns)
         self.events: queue.SimpleQueue[tuple[str, str, Any]] = queue.SimpleQueue()
@@ -227,7 +231,7 @@ class WorldProcess:
         """Block until all n agents (and the recorder if asked) are alive."""
         deadline = time.monotonic() + self.args.startup_timeout
         while not self.stopping:
-            if len(self.live) == self.n and (self.recorder_alive or not self.args.wait_recorder):
+            if self.live >= self.team and (self.recorder_alive or not self.args.wait_recorder):
                 return True
             remaining = deadline - time.monotonic()
             if remaining <= 0:
@@ -237,7 +241,7 @@ class WorldProcess:
             except queue.Empty:
                 break
         if not self.stopping:
-            missing = sorted(set(range(self.n)) - self.live)
+            missing = sorted(self.team - self.live)
             what = f"agents {missing}" if missing else "the recorder"
             print(
                 f"btrack world: {what} not alive after {self.args.startup_timeout:g} s",
@@ -322,12 +326,14 @@ class WorldProcess:
 def _check_args(args: argparse.Namespace) -> str | None:
     if args.robots < 1:
         return "--robots must be at least 1"
+    if args.team is not None and not 1 <= args.team <= args.robots:
+        return "--team must be between 1 and --robots"
     if not args.dt > 0 or not args.duration > 0:
         return "--dt and --duration must be positive"
     if args.odom_noise < 0 or args.cmd_timeout < 0 or args.startup_timeout < 0:
         return "--odom-noise, --cmd-timeout and --startup-timeout must be >= 0"
     try:
-        parse_start(args.start, args.robots)
+        parse_start(args.start, args.team or args.robots)
     except ValueError as exc:
         return str(exc)
     return None
@@ -346,7 +352,7 @@ def main(argv: list[str] | None = None) -> int:
     except MapError as exc:
         print(f"btrack world: {exc}", file=sys.stderr)
         return 2
-    world = World(gmap, args.robots, args.start, args.seed, args.odom_noise)
+    world = World(gmap, args.robots, args.start, args.seed, args.odom_noise, args.team)
     total = round(args.duration / args.dt)
 
     with bounded_session(options_from_args(args)) as session:

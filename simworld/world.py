@@ -19,6 +19,7 @@ ROBOT_RADIUS_M = 0.17
 MARGIN_OUT_M = 0.3  # the patrol goes this far back out past the edge before turning
 START_INSIDE_M = 0.05  # phase-0 robots start a hair inside their segment
 AHEAD_PHASE = 2.0 * math.pi / 5.0
+PARKED_BEHIND_M = 0.5  # robots not in the starting team wait this far behind the start line
 
 
 @dataclass(frozen=True)
@@ -63,8 +64,18 @@ def start_poses(gmap: GridMap, n: int, start: str) -> list[tuple[float, float, f
     return poses
 
 
+def parked_poses(gmap: GridMap, count: int) -> list[tuple[float, float, float]]:
+    """Robots that join the team later wait behind the start line (between it and the
+    laser), spread evenly along the edge, heading +y."""
+    lo, hi = gmap.edge_lo, gmap.edge_hi
+    y = -ROBOT_ROOM_M - PARKED_BEHIND_M
+    return [(lo + (j + 0.5) * (hi - lo) / count, y, math.pi / 2.0) for j in range(count)]
+
+
 class World:
-    """n differential-drive robots on a ``GridMap``."""
+    """n differential-drive robots on a ``GridMap``: the first ``team`` (default all)
+    start on the start line in equal segments, the rest are parked behind it until an
+    agent drives them."""
 
     def __init__(
         self,
@@ -73,9 +84,11 @@ class World:
         start: str = "in-phase",
         seed: int = 1,
         odom_noise: float = 0.02,
+        team: int | None = None,
     ) -> None:
-        if n < 1:
-            raise ValueError("need at least one robot")
+        team = n if team is None else team
+        if not 1 <= team <= n:
+            raise ValueError("need at least one robot, and a starting team of 1 to n")
         if odom_noise < 0:
             raise ValueError("odometry noise must be >= 0")
         self.map = gmap
@@ -83,7 +96,7 @@ class World:
         self.start = start
         self.odom_noise = odom_noise
         self._rng = np.random.default_rng(seed)
-        poses = start_poses(gmap, n, start)
+        poses = start_poses(gmap, team, start) + (parked_poses(gmap, n - team) if n > team else [])
         self._x = [p[0] for p in poses]
         self._y = [p[1] for p in poses]
         self._th = [p[2] for p in poses]

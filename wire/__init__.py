@@ -9,6 +9,7 @@ from wire.keys import Keys
 from wire.messages import (
     AgentState,
     Cmd,
+    Fault,
     Pose,
     Sense,
     Tick,
@@ -20,6 +21,7 @@ __all__ = [
     "AgentState",
     "Cmd",
     "DecodeError",
+    "Fault",
     "Keys",
     "Pose",
     "Sense",

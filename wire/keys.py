@@ -53,6 +53,10 @@ class Keys:
     def world_info(self) -> str:
         return f"{self.ns}/world/info"
 
+    # launcher -> recorder: faults it injected
+    def fault(self) -> str:
+        return f"{self.ns}/fault"
+
     def everything(self) -> str:
         return f"{self.ns}/**"
 

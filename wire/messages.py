@@ -165,4 +165,23 @@ class WorldInfo:
         _require(self.robots >= 1 and self.dt > 0, "bad robots or dt")
 
 
-ALL_TYPES = (Sense, Pose, Truth, Cmd, AgentState, Tick, WorldInfo)
+FAULT_KINDS = ("kill", "restart", "freeze", "thaw", "join")
+
+
+@dataclass(frozen=True)
+class Fault:
+    """A fault injected into the run (launcher -> recorder): at simulation time ``t``
+    agent ``agent`` was killed (SIGKILL), restarted, frozen (SIGSTOP), thawed
+    (SIGCONT) or joined the team for the first time."""
+
+    t: float
+    kind: str
+    agent: int
+    pid: int = 0  # the process the signal went to, or the new process
+
+    def check(self) -> None:
+        _require(self.t >= 0 and self.agent >= 0 and self.pid >= 0, "negative t, agent or pid")
+        _require(self.kind in FAULT_KINDS, f"unknown fault kind {self.kind!r}")
+
+
+ALL_TYPES = (Sense, Pose, Truth, Cmd, AgentState, Tick, WorldInfo, Fault)
