@@ -301,6 +301,10 @@ def _watch(args: argparse.Namespace, group: ProcessGroup, monitor: Monitor, worl
                     print(("\n" if tty else "") + "btrack sim: " + line, flush=True)
         if world.proc.poll() is not None:
             break
+        if not recorder.alive() and recorder.proc.returncode == 0:
+            monitor.drain()  # the recorder ends by itself once it has the final tick
+            if monitor.tick is not None and monitor.tick.done:
+                continue
         dead = injector.unexpected_exit() or (None if recorder.alive() else recorder)
         if dead is not None:
             return _fail(group, dead, "exited early")
