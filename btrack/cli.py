@@ -15,6 +15,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "world": ("simworld.process", "the simulator: maps, kinematics, sensors, the clock"),
     "record": ("recorder.process", "record everything on the bus into an MCAP file"),
     "report": ("report.cli", "measures, summary.json and figures from a recorded run"),
+    "router": ("deploy.router", "a Zenoh router (the base station's), TLS and access control"),
+    "deploy": ("deploy.cli", "a fleet's configurations, units and certificates from FLEET.toml"),
 }
 
 
