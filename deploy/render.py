@@ -61,9 +61,13 @@ def robot_rules(ns: str, rid: int) -> list[dict[str, Any]]:
         {"id": f"{me}-members", "permission": "allow", "flows": ["egress"],
          "messages": ["liveliness_token", "reply"], "key_exprs": [f"{ns}/alive/agent/*"]},
         {"id": f"{me}-hear", "permission": "allow", "flows": ["egress"],
-         "messages": ["put", "declare_subscriber"],
+         "messages": ["put"],
          "key_exprs": [f"{ns}/robot/{rid}/sense", f"{ns}/robot/{rid}/pose",
-                       f"{ns}/robot/{rid}/cmd", f"{ns}/agent/*/state"]},
+                       f"{ns}/agent/*/state"]},
+        # A client sends a put only where it knows of a subscriber: it must be told of
+        # the base station's (wildcard) subscriptions. Declarations carry no data.
+        {"id": f"{me}-subscribers", "permission": "allow", "flows": ["egress"],
+         "messages": ["declare_subscriber"], "key_exprs": [f"{ns}/**"]},
     ]
 
 
