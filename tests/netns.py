@@ -20,6 +20,13 @@ from pathlib import Path
 
 from tests.procutil import end
 
+
+def stop(proc: subprocess.Popen) -> None:
+    """End a process we started, by pid, unless it has already exited and been
+    reaped: its pid may then belong to someone else's process."""
+    if proc.poll() is None:
+        end(proc)
+
 LINKEMU = Path(__file__).resolve().parent / "linkemu.py"
 
 
@@ -132,9 +139,9 @@ class Site:
 
     def close(self) -> None:
         for proc in reversed(self.procs):
-            end(proc)
+            stop(proc)
         if self.emu is not None:
-            end(self.emu)  # type: ignore[arg-type]
+            stop(self.emu)
         _ip("link", "del", self.veth[0], check=False)
         for ns in self.made_ns:
             _ip("netns", "del", ns, check=False)

@@ -22,7 +22,8 @@ import zenoh
 from deploy.certs import make_ca, make_cert, make_fleet_certs
 from deploy.fleet import Fleet, parse
 from deploy.render import client_config, router_config
-from tests.procutil import end, free_port, start, unique_ns, wait_for
+from tests.netns import stop
+from tests.procutil import free_port, start, unique_ns, wait_for
 
 ROOT = Path(__file__).resolve().parent.parent
 PROBE = ROOT / "tests" / "acl_probe.py"
@@ -76,7 +77,7 @@ dir = "{tmp / "tls"}"
         try:
             out, _ = proc.communicate(timeout=60)
         finally:
-            end(proc)  # type: ignore[arg-type]
+            stop(proc)
         return subprocess.CompletedProcess(args, proc.returncode, out, "")
 
 
@@ -131,7 +132,7 @@ def bus(tmp_path_factory):
         with session:
             yield b, observer
     finally:
-        end(b.proc)
+        stop(b.proc)
 
 
 def test_robot2_certificate_cannot_publish_robot1_keys(bus) -> None:
@@ -189,4 +190,4 @@ def test_without_access_control_the_same_claim_would_go_through(tmp_path: Path) 
             assert obs.seen(f"{b.ns}/robot/1/cmd") == 20
             assert obs.seen(f"{b.ns}/alive/agent/1") == 1
     finally:
-        end(b.proc)
+        stop(b.proc)
