@@ -220,6 +220,9 @@ def install_notes(fleet: Fleet, base_units: list[str]) -> str:
                   "robot i's `robot-I.pem`/`robot-I.key` on its computer (common name "
                   "`btrack-robot-I`). `btrack deploy certs FLEET.toml --out DIR` makes a test "
                   "CA and all of them; keys must be readable by that user only."]
+    if fleet.base.recorder:
+        lines += ["", f"The recorder writes under `{fleet.base.recorder_dir}`: create it on the "
+                  f"base station, owned by `{fleet.user}`."]
     lines += ["", "Base station:", "", "    systemctl daemon-reload",
               f"    systemctl enable --now {' '.join(base_units)}", ""]
     for r in fleet.robots:

@@ -4,6 +4,7 @@ is what a robot needs and no more; bad fleet files are refused by key and line."
 
 from __future__ import annotations
 
+import dataclasses
 import shutil
 import subprocess
 import sys
@@ -13,7 +14,7 @@ import pytest
 import zenoh
 
 from deploy.fleet import FleetError, parse
-from deploy.render import render
+from deploy.render import render, write
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLE = ROOT / "deploy" / "examples" / "fleet.toml"
@@ -77,6 +78,15 @@ def test_json5_files_load_in_zenoh(rendered: Path) -> None:
 @pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="no systemd-analyze here")
 def test_units_pass_systemd_analyze_verify(rendered: Path, tmp_path: Path) -> None:
     units = sorted((rendered / "base.lab/etc/systemd/system").glob("*.service"))
+    # and the units the example leaves out: hardware bridges and the localizer
+    fleet = parse(EXAMPLE.read_text())
+    hw = dataclasses.replace(fleet, btrack=str(BTRACK), base=dataclasses.replace(
+        fleet.base, world="hardware", localizer=True))
+    hw_units = {k: v for k, v in render(hw).items() if k.endswith((
+        "btrack-hwbridge.service", "btrack-localizer.service"))}
+    assert len(hw_units) == 2 and "btrack-world.service" not in " ".join(render(hw))
+    write(hw_units, tmp_path / "hw")
+    units += sorted((tmp_path / "hw").rglob("*.service"))
     # A template is verified through an instance: robot 1's, beside the template.
     agent_dir = tmp_path / "agent"
     agent_dir.mkdir()
