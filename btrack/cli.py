@@ -16,6 +16,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "record": ("recorder.process", "record everything on the bus into an MCAP file"),
     "report": ("report.cli", "measures, summary.json and figures from a recorded run"),
     "suite": ("deploy.suite", "the thesis's twelve cases, each a full team, and its tables"),
+    "router": ("deploy.router", "a Zenoh router (the base station's), TLS and access control"),
+    "deploy": ("deploy.cli", "a fleet's configurations, units and certificates from FLEET.toml"),
 }
 
 

@@ -1,0 +1,105 @@
+"""A certificate authority and the certificates a fleet needs, made with the
+``openssl`` command (``btrack deploy certs``; the tests use it in a temp dir).
+
+The base station's certificate (common name ``btrack-base``) names its host, its
+address and localhost, since robots check the router's name; robot i's
+(``btrack-robot-I``) is what the router's access control tells robots apart by.
+Good enough for a lab and for tests; a site with its own PKI issues the same
+names from it instead.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import os
+import secrets
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+from deploy.fleet import Fleet
+
+CURVE = "prime256v1"
+
+
+class CertError(RuntimeError):
+    pass
+
+
+def _openssl(*args: str) -> None:
+    exe = shutil.which("openssl")
+    if exe is None:
+        raise CertError("the openssl command is needed to make certificates")
+    proc = subprocess.run([exe, *args], capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise CertError(f"openssl {args[0]} failed: {proc.stderr.strip()[-500:]}")
+
+
+def make_ca(out: Path, name: str = "btrack fleet CA", days: int = 3650) -> tuple[Path, Path]:
+    """A self-signed CA: (certificate, private key) in ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    pem, key = out / "ca.pem", out / "ca.key"
+    _openssl("req", "-x509", "-newkey", "ec", "-pkeyopt", f"ec_paramgen_curve:{CURVE}",
+             "-nodes", "-keyout", str(key), "-out", str(pem), "-days", str(days),
+             "-subj", f"/CN={name}",
+             "-addext", "basicConstraints=critical,CA:TRUE",
+             "-addext", "keyUsage=critical,keyCertSign,cRLSign")
+    os.chmod(key, 0o600)
+    return pem, key
+
+
+def make_cert(ca: tuple[Path, Path], pem: Path, key: Path, common_name: str,
+              names: tuple[str, ...] = (), days: int = 825) -> None:
+    """A certificate signed by ``ca`` for ``common_name``, usable both as a TLS
+    server and a client; ``names`` (host names or IP addresses) go in its
+    subjectAltName."""
+    pem.parent.mkdir(parents=True, exist_ok=True)
+    key.parent.mkdir(parents=True, exist_ok=True)
+    alt = []
+    for n in dict.fromkeys(names):
+        try:
+            ipaddress.ip_address(n)
+            alt.append(f"IP:{n}")
+        except ValueError:
+            alt.append(f"DNS:{n}")
+    ext = ["basicConstraints=critical,CA:FALSE",
+           "keyUsage=critical,digitalSignature,keyEncipherment",
+           "extendedKeyUsage=serverAuth,clientAuth"]
+    if alt:
+        ext.append("subjectAltName=" + ",".join(alt))
+    with tempfile.TemporaryDirectory() as tmp:
+        csr, extfile = Path(tmp) / "req.csr", Path(tmp) / "ext.cnf"
+        extfile.write_text("\n".join(ext) + "\n")
+        _openssl("req", "-new", "-newkey", "ec", "-pkeyopt", f"ec_paramgen_curve:{CURVE}",
+                 "-nodes", "-keyout", str(key), "-out", str(csr), "-subj", f"/CN={common_name}")
+        _openssl("x509", "-req", "-in", str(csr), "-CA", str(ca[0]), "-CAkey", str(ca[1]),
+                 "-set_serial", str(secrets.randbits(63)), "-days", str(days),
+                 "-extfile", str(extfile), "-out", str(pem))
+    os.chmod(key, 0o600)
+
+
+def make_fleet_certs(fleet: Fleet, out: Path, flat: bool = False) -> list[Path]:
+    """A CA (kept in ``out/ca/``, never copied to a host) and every host's
+    certificates under ``out/<host>/<tls dir>/``, beside ``btrack deploy render``'s
+    tree, or (``flat``, for tests on one machine) all in ``out/``. Returns the files
+    written."""
+    ca = make_ca(out / "ca")
+    tls = fleet.tls
+    written = [*ca]
+
+    def host_dir(host: str) -> Path:
+        d = out if flat else out / host / tls.dir.strip("/")
+        d.mkdir(parents=True, exist_ok=True)
+        shutil.copy(ca[0], d / tls.ca)
+        return d
+
+    d = host_dir(fleet.base.host)
+    names = tuple(n for n in (fleet.base.host, fleet.base.address, "localhost", "127.0.0.1") if n)
+    make_cert(ca, d / tls.base_cert, d / tls.base_key, Fleet.common_name(None), names)
+    written += [d / tls.ca, d / tls.base_cert, d / tls.base_key]
+    for r in fleet.robots:
+        d = host_dir(r.host)
+        make_cert(ca, d / r.cert, d / r.key, Fleet.common_name(r.id), (r.host,))
+        written += [d / tls.ca, d / r.cert, d / r.key]
+    return written

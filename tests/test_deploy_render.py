@@ -1,0 +1,186 @@
+"""`btrack deploy render` on the example fleet file: every host gets its files, the
+units pass `systemd-analyze verify`, the JSON5 files load in zenoh, the access control
+is what a robot needs and no more; bad fleet files are refused by key and line."""
+
+from __future__ import annotations
+
+import dataclasses
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from deploy.fleet import FleetError, parse
+from deploy.render import render, write
+
+ROOT = Path(__file__).resolve().parent.parent
+EXAMPLE = ROOT / "deploy" / "examples" / "fleet.toml"
+BTRACK = Path(sys.executable).parent / "btrack"
+HOSTS = {"base.lab", "robot0.lab", "robot1.lab", "robot2.lab"}
+
+
+def btrack(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "btrack", *args], capture_output=True,
+                          text=True, timeout=60)
+
+
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("render")
+    # The units name the btrack command; point it at this venv's so verify finds it.
+    res = btrack("deploy", "render", str(EXAMPLE), "--out", str(out), "--btrack", str(BTRACK))
+    assert res.returncode == 0, res.stderr
+    return out
+
+
+def test_every_host_gets_its_files(rendered: Path) -> None:
+    assert {p.name for p in rendered.iterdir() if p.is_dir()} == HOSTS
+    base = rendered / "base.lab"
+    for rel in ("etc/btrack/zenoh-router.json5", "etc/btrack/zenoh-base.json5",
+                "etc/btrack/base.env", "etc/systemd/system/btrack-router.service",
+                "etc/systemd/system/btrack-world.service",
+                "etc/systemd/system/btrack-recorder.service"):
+        assert (base / rel).is_file(), rel
+    for i in range(3):
+        host = rendered / f"robot{i}.lab"
+        assert (host / f"etc/btrack/zenoh-agent-{i}.json5").is_file()
+        env = (host / f"etc/btrack/agent-{i}.env").read_text()
+        assert f"ZENOH_CONFIG=/etc/btrack/zenoh-agent-{i}.json5" in env
+        assert "BTRACK_ROBOTS=3" in env and "BTRACK_NS=btrack/lab1" in env
+        unit = (host / "etc/systemd/system/btrack-agent@.service").read_text()
+        assert f"ExecStart={BTRACK} agent --id %i" in unit
+        assert "EnvironmentFile=/etc/btrack/agent-%i.env" in unit
+        assert "Restart=on-failure" in unit
+        # a robot computer holds no one else's files
+        assert not list(host.rglob("zenoh-router.json5"))
+        assert [p.name for p in host.rglob("*.json5")] == [f"zenoh-agent-{i}.json5"]
+    assert "btrack-agent@1" in (rendered / "INSTALL.md").read_text()
+
+
+def test_json5_files_load_in_zenoh(rendered: Path) -> None:
+    files = sorted(rendered.rglob("*.json5"))
+    assert len(files) == 5
+    for path in files:
+        conf = zenoh.Config.from_file(str(path))
+        text = str(conf)
+        assert '"lease":1000' in text.replace(" ", ""), path
+        assert '"tls":{' in text.replace(" ", ""), path
+    router = str(zenoh.Config.from_file(str(rendered / "base.lab/etc/btrack/zenoh-router.json5")))
+    assert '"enable_mtls":true' in router.replace(" ", "")
+    assert '"default_permission":"deny"' in router.replace(" ", "")
+    robot = str(zenoh.Config.from_file(str(rendered / "robot2.lab/etc/btrack/zenoh-agent-2.json5")))
+    assert "tls/base.lab:7447" in robot and "/etc/btrack/tls/robot-2.pem" in robot
+
+
+@pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="no systemd-analyze here")
+def test_units_pass_systemd_analyze_verify(rendered: Path, tmp_path: Path) -> None:
+    units = sorted((rendered / "base.lab/etc/systemd/system").glob("*.service"))
+    # and the units the example leaves out: hardware bridges and the localizer
+    fleet = parse(EXAMPLE.read_text())
+    hw = dataclasses.replace(fleet, btrack=str(BTRACK), base=dataclasses.replace(
+        fleet.base, world="hardware", localizer=True))
+    hw_units = {k: v for k, v in render(hw).items() if k.endswith((
+        "btrack-hwbridge.service", "btrack-localizer.service"))}
+    assert len(hw_units) == 2 and "btrack-world.service" not in " ".join(render(hw))
+    write(hw_units, tmp_path / "hw")
+    units += sorted((tmp_path / "hw").rglob("*.service"))
+    # A template is verified through an instance: robot 1's, beside the template.
+    agent_dir = tmp_path / "agent"
+    agent_dir.mkdir()
+    shutil.copy(rendered / "robot1.lab/etc/systemd/system/btrack-agent@.service", agent_dir)
+    (agent_dir / "btrack-agent@1.service").symlink_to("btrack-agent@.service")
+    for group in (units, [agent_dir / "btrack-agent@1.service"]):
+        res = subprocess.run(["systemd-analyze", "verify", *map(str, group)],
+                             capture_output=True, text=True, timeout=60)
+        # verify returns 0 on unknown keys; they only show as warnings, so none is allowed
+        assert res.returncode == 0 and not (res.stdout + res.stderr).strip(), (
+            res.stdout + res.stderr)
+
+
+def test_robot_may_publish_only_its_own_keys_in_the_rendered_acl() -> None:
+    fleet = parse(EXAMPLE.read_text())
+    acl = render_router_acl(fleet)
+    rules = {r["id"]: r for r in acl["rules"]}
+    put = rules["robot1-put"]
+    assert put["flows"] == ["ingress"] and put["messages"] == ["put"]
+    assert put["key_exprs"] == ["btrack/lab1/robot/1/cmd", "btrack/lab1/agent/1/state"]
+    assert rules["robot1-token"]["key_exprs"] == ["btrack/lab1/alive/agent/1"]
+    subjects = {s["id"]: s for s in acl["subjects"]}
+    assert subjects["robot1"]["cert_common_names"] == ["btrack-robot-1"]
+    # no robot rule lets it put or declare a token on a key with a wildcard
+    for rule in acl["rules"]:
+        if rule["id"].startswith("robot") and "ingress" in rule["flows"]:
+            if {"put", "liveliness_token", "delete"} & set(rule["messages"]):
+                assert all("*" not in k for k in rule["key_exprs"]), rule
+
+
+def render_router_acl(fleet):
+    from deploy.render import access_control
+
+    return access_control(fleet)
+
+
+def test_render_is_deterministic() -> None:
+    fleet = parse(EXAMPLE.read_text())
+    assert render(fleet) == render(fleet)
+
+
+def test_certs_for_the_fleet_chain_to_its_ca(tmp_path: Path) -> None:
+    if shutil.which("openssl") is None:
+        pytest.skip("no openssl command")
+    res = btrack("deploy", "certs", str(EXAMPLE), "--out", str(tmp_path))
+    assert res.returncode == 0, res.stderr
+    tls = tmp_path / "robot1.lab/etc/btrack/tls"
+    assert sorted(p.name for p in tls.iterdir()) == ["ca.pem", "robot-1.key", "robot-1.pem"]
+    assert (tls / "robot-1.key").stat().st_mode & 0o077 == 0
+    assert not list(tmp_path.glob("*.lab/**/ca.key"))  # the CA key stays off the hosts
+    ok = subprocess.run(["openssl", "verify", "-CAfile", str(tls / "ca.pem"),
+                         str(tls / "robot-1.pem")], capture_output=True, text=True)
+    assert ok.returncode == 0, ok.stderr
+    subj = subprocess.run(["openssl", "x509", "-noout", "-subject", "-ext", "subjectAltName",
+                           "-in", str(tmp_path / "base.lab/etc/btrack/tls/base.pem")],
+                          capture_output=True, text=True).stdout
+    assert "CN = btrack-base" in subj and "base.lab" in subj and "192.168.50.1" in subj
+
+
+BAD = [
+    ('namespace = "a"\n[base]\nhost = "b"\nbogus = 1\n[[robots]]\nid = 0\nhost = "r"\n',
+     ":4: base.bogus: unknown key"),
+    ('namespace = "a"\n[base]\nhost = "b"\n[[robots]]\nid = 0\nhost = "r"\n'
+     '[[robots]]\nid = 0\nhost = "s"\n', ":8: robots[1].id: duplicate robot id 0"),
+    ('namespace = "a"\n[base]\nport = 7447\n[[robots]]\nid = 0\nhost = "r"\n',
+     "base.host: missing"),
+    ('namespace = "a"\n[base]\nhost = "b"\nport = 99999\n[[robots]]\nid = 0\nhost = "r"\n',
+     ":4: base.port: must be in 1..65535"),
+    ('namespace = "a"\n[base]\nhost = "b"\n[[robots]]\nid = 1\nhost = "r"\n',
+     "robot ids must be 0..0"),
+    ('namespace = "a"\n[base]\nhost = "b"\n[[robots]]\nid = 0\nhost = "r"\n'
+     '[tls]\nenabled = false\n', "tls.access_control: needs enabled = true"),
+    ('namespace = "a"\n[base\nhost = "b"\n', "not valid TOML"),
+    ('namespace = "a b"\n[base]\nhost = "b"\n[[robots]]\nid = 0\nhost = "r"\n',
+     ":1: namespace:"),
+]
+
+
+@pytest.mark.parametrize("text,expected", BAD)
+def test_bad_fleet_is_refused_by_key_and_line(text: str, expected: str) -> None:
+    with pytest.raises(FleetError) as err:
+        parse(text, "f.toml")
+    assert expected in str(err.value), str(err.value)
+
+
+def test_cli_refuses_a_bad_fleet_without_a_traceback(tmp_path: Path) -> None:
+    bad = tmp_path / "fleet.toml"
+    bad.write_text(BAD[0][0])
+    res = btrack("deploy", "render", str(bad), "--out", str(tmp_path / "out"))
+    assert res.returncode == 2
+    assert "fleet.toml:4: base.bogus: unknown key" in res.stderr
+    assert "Traceback" not in res.stderr
+    assert not (tmp_path / "out").exists()
+    missing = btrack("deploy", "render", str(tmp_path / "nope.toml"), "--out", str(tmp_path))
+    assert missing.returncode == 2 and "cannot read" in missing.stderr
+    for args in (["deploy", "--help"], ["deploy", "render", "--help"], ["router", "--help"]):
+        assert btrack(*args).returncode == 0

@@ -1,0 +1,193 @@
+"""The rendered TLS and access-control configuration, for real: a router process
+(``btrack router`` with the router's JSON5), a process holding robot 2's certificate,
+and this test's session as the base station's observer, all on loopback.
+
+- A process without a valid certificate (none, one from another CA even with robot 1's
+  name, plain TCP) cannot join: it fails to open and nothing of it reaches anyone.
+- Robot 2's certificate cannot publish robot 1's command or state, nor hold robot 1's
+  liveliness token; the same process's own keys go through (the control).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from deploy.certs import make_ca, make_cert, make_fleet_certs
+from deploy.fleet import Fleet, parse
+from deploy.render import client_config, router_config
+from tests.netns import stop
+from tests.procutil import free_port, start, unique_ns, wait_for
+
+ROOT = Path(__file__).resolve().parent.parent
+PROBE = ROOT / "tests" / "acl_probe.py"
+
+pytestmark = pytest.mark.skipif(
+    subprocess.run(["which", "openssl"], capture_output=True).returncode != 0,
+    reason="needs the openssl command to make test certificates")
+
+
+class Bus:
+    """The team's setup: certificates, configuration files and the router process."""
+
+    def __init__(self, tmp: Path, acl: bool = True):
+        self.tmp = tmp
+        self.ns = unique_ns()
+        port = free_port()
+        self.fleet: Fleet = parse(f'''
+namespace = "{self.ns}"
+[base]
+host = "localhost"
+address = "127.0.0.1"
+port = {port}
+[tls]
+dir = "{tmp / "tls"}"
+{"".join(f'[[robots]]{chr(10)}id = {i}{chr(10)}host = "localhost"{chr(10)}' for i in range(3))}
+''')
+        make_fleet_certs(self.fleet, tmp / "tls", flat=True)
+        conf = router_config(self.fleet, "127.0.0.1")
+        if not acl:
+            del conf["access_control"]
+        self.router_file = self.write("router", conf)
+        self.proc = start(["router", "--zenoh-config", str(self.router_file)],
+                          log=tmp / "router.log")
+
+    def write(self, name: str, conf: dict) -> Path:
+        path = self.tmp / f"{name}.json5"
+        path.write_text(json.dumps(conf, indent=1))
+        return path
+
+    def robot_config(self, rid: int) -> dict:
+        return client_config(self.fleet, self.fleet.robot(rid), host="localhost")
+
+    def probe(self, conf: dict, name: str, claim: int, own: int | None = None,
+              ) -> subprocess.CompletedProcess[str]:
+        path = self.write(name, conf)
+        args = [sys.executable, str(PROBE), str(path), "--ns", self.ns, "--claim", str(claim)]
+        if own is not None:
+            args += ["--own", str(own)]
+        proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                text=True, start_new_session=True)
+        try:
+            out, _ = proc.communicate(timeout=60)
+        finally:
+            stop(proc)
+        return subprocess.CompletedProcess(args, proc.returncode, out, "")
+
+
+class Observer:
+    """Everything under the namespace that reaches the base station, by key."""
+
+    def __init__(self, session: zenoh.Session, ns: str):
+        self.lock = threading.Lock()
+        self.keys: list[str] = []
+        self.tokens: list[str] = []
+        self._subs = [
+            session.declare_subscriber(f"{ns}/**", self._on_put),
+            session.liveliness().declare_subscriber(f"{ns}/alive/**", self._on_token),
+        ]
+
+    def _on_put(self, sample: zenoh.Sample) -> None:
+        with self.lock:
+            self.keys.append(str(sample.key_expr))
+
+    def _on_token(self, sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.PUT:
+            with self.lock:
+                self.tokens.append(str(sample.key_expr))
+
+    def seen(self, fragment: str) -> int:
+        with self.lock:
+            return sum(fragment in k for k in self.keys + self.tokens)
+
+
+def open_observer(b: Bus) -> tuple[zenoh.Session, Observer]:
+    """The base station's session, once the router accepts it."""
+    conf = client_config(b.fleet, None)
+    opened: list[zenoh.Session] = []
+
+    def base_station_joins() -> bool:
+        assert b.proc.poll() is None, (b.tmp / "router.log").read_text()
+        try:
+            opened.append(zenoh.open(zenoh.Config.from_json5(json.dumps(conf))))
+        except zenoh.ZError:
+            return False
+        return True
+
+    wait_for(base_station_joins, 30, "the router to accept the base station")
+    return opened[0], Observer(opened[0], b.ns)
+
+
+@pytest.fixture(scope="module")
+def bus(tmp_path_factory):
+    b = Bus(tmp_path_factory.mktemp("sec"))
+    try:
+        session, observer = open_observer(b)
+        with session:
+            yield b, observer
+    finally:
+        stop(b.proc)
+
+
+def test_robot2_certificate_cannot_publish_robot1_keys(bus) -> None:
+    b, obs = bus
+    res = b.probe(b.robot_config(2), "robot2", claim=1, own=2)
+    assert res.returncode == 0 and "opened" in res.stdout, res.stdout
+    # the control: robot 2's own keys went through, the last round included
+    wait_for(lambda: obs.seen(f"{b.ns}/robot/2/cmd") >= 20, 10, "robot 2's own commands")
+    wait_for(lambda: obs.seen(f"{b.ns}/agent/2/state") >= 20, 10, "robot 2's own states")
+    wait_for(lambda: obs.seen(f"{b.ns}/alive/agent/2") >= 1, 10, "robot 2's own token")
+    # every claim on robot 1 was sent before robot 2's own of the same round: none arrived
+    assert obs.seen(f"{b.ns}/robot/1/") == 0
+    assert obs.seen(f"{b.ns}/agent/1/") == 0
+    assert obs.seen(f"{b.ns}/alive/agent/1") == 0
+    assert "robot/1" not in " ".join(obs.keys + obs.tokens)
+
+
+def test_a_process_without_a_valid_certificate_cannot_join(bus, tmp_path: Path) -> None:
+    b, obs = bus
+    robot1 = b.robot_config(1)
+    no_cert = json.loads(json.dumps(robot1))
+    tls = no_cert["transport"]["link"]["tls"]
+    del tls["connect_certificate"], tls["connect_private_key"]
+    # a certificate with robot 1's very name, from a CA the router does not trust
+    rogue_ca = make_ca(tmp_path / "rogue", "rogue CA")
+    make_cert(rogue_ca, tmp_path / "rogue1.pem", tmp_path / "rogue1.key",
+              Fleet.common_name(1), ("localhost",))
+    rogue = json.loads(json.dumps(robot1))
+    rogue["transport"]["link"]["tls"].update(connect_certificate=str(tmp_path / "rogue1.pem"),
+                                             connect_private_key=str(tmp_path / "rogue1.key"))
+    plain = json.loads(json.dumps(robot1))
+    plain["connect"]["endpoints"] = [e.replace("tls/", "tcp/") for e in
+                                     plain["connect"]["endpoints"]]
+    for name, conf in (("no-cert", no_cert), ("rogue-ca", rogue), ("plain-tcp", plain)):
+        res = b.probe(conf, name, claim=1)
+        assert res.returncode == 3 and "cannot open" in res.stdout, (name, res.stdout)
+    assert obs.seen(f"{b.ns}/robot/1/") == 0 and obs.seen(f"{b.ns}/alive/agent/1") == 0
+    # and the router still serves a robot with a good certificate
+    res = b.probe(b.robot_config(0), "robot0", claim=2, own=0)
+    assert res.returncode == 0
+    wait_for(lambda: obs.seen(f"{b.ns}/robot/0/cmd") >= 20, 10, "robot 0's own commands")
+    assert obs.seen(f"{b.ns}/robot/2/cmd") == 20  # only robot 2's own, from the first test
+
+
+def test_without_access_control_the_same_claim_would_go_through(tmp_path: Path) -> None:
+    """The control for the first test: it is the access control, not the setup, that
+    stops robot 2's claim on robot 1's keys."""
+    b = Bus(tmp_path, acl=False)
+    try:
+        session, obs = open_observer(b)
+        with session:
+            res = b.probe(b.robot_config(2), "robot2", claim=1, own=2)
+            assert res.returncode == 0, res.stdout
+            wait_for(lambda: obs.seen(f"{b.ns}/robot/2/cmd") >= 20, 10, "robot 2's commands")
+            assert obs.seen(f"{b.ns}/robot/1/cmd") == 20
+            assert obs.seen(f"{b.ns}/alive/agent/1") == 1
+    finally:
+        stop(b.proc)
