@@ -40,7 +40,10 @@ def start(args: list[str], log: Path | None = None) -> subprocess.Popen[bytes]:
 
 
 def end(proc: subprocess.Popen[bytes], grace_s: float = 5.0) -> None:
-    """End a process we started, by its pid: SIGTERM, then SIGKILL."""
+    """End a process we started, by its pid: SIGTERM, then SIGKILL. One that has already
+    exited (and been reaped) is left alone: its pid may be someone else's by now."""
+    if proc.poll() is not None:
+        return
     kill_pid(proc.pid, grace_s, proc)
 
 
