@@ -296,9 +296,8 @@ def _watch(args: argparse.Namespace, group: ProcessGroup, monitor: Monitor, worl
     tty = sys.stdout.isatty()
     while world.alive():
         if injector.wake.wait(0.2):
-            for line in injector.fire_due():
-                if not args.quiet:
-                    print(("\n" if tty else "") + "btrack sim: " + line, flush=True)
+            for line in injector.fire_due():  # shown even when quiet: it changes the run
+                print(("\n" if tty else "") + "btrack sim: " + line, flush=True)
         if world.proc.poll() is not None:
             break
         if not recorder.alive() and recorder.proc.returncode == 0:

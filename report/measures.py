@@ -301,6 +301,13 @@ def revisit_intervals(
     visits of the points (``point_gaps``). A point seen fewer than twice in the window
     counts the whole window as its worst interval."""
     gaps = point_gaps(points, visit_t, visit_x, radius, t_from, t_to, merge_s, visit_group)
+    return pooled_revisit(gaps, t_from, t_to)
+
+
+def pooled_revisit(
+    gaps: Sequence[np.ndarray | None], t_from: float, t_to: float
+) -> tuple[float, float]:
+    """Mean over every interval of every point, and the worst point's worst."""
     known = [g for g in gaps if g is not None]
     pooled = np.concatenate(known) if known else np.empty(0)
     _, worst = revisit_profile(gaps, t_from, t_to)

@@ -92,9 +92,7 @@ class Revisit:
         return m.revisit_profile(self.gaps, self.t_from, self.t_to)
 
     def pooled(self) -> tuple[float, float]:
-        known = [g for g in self.gaps if g is not None]
-        mean = m.nanmean(np.concatenate(known)) if known else math.nan
-        return mean, m.nanmax(self.profile()[1]) if self.gaps else math.nan
+        return m.pooled_revisit(self.gaps, self.t_from, self.t_to)
 
 
 def revisit(run: RunData, t: np.ndarray) -> Revisit | None:

@@ -80,6 +80,21 @@ def pid_alive(pid: int) -> bool:
         return False
 
 
+def run_sim(out: Path, *extra: str, timeout: float = 400) -> subprocess.CompletedProcess[str]:
+    """``btrack sim --out OUT --quiet EXTRA...`` to its end; every process it started
+    is ended whatever happens."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "btrack", "sim", "--out", str(out), "--quiet", *extra],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+    )
+    try:
+        stdout, stderr = proc.communicate(timeout=timeout)
+    finally:
+        end(proc)
+        end_children_of_run(out)
+    return subprocess.CompletedProcess(proc.args, proc.returncode, stdout, stderr)
+
+
 def end_children_of_run(out: Path) -> list[int]:
     """End every process a launcher recorded in OUT/logs/pids.json; returns the pids."""
     path = out / "logs" / "pids.json"
@@ -100,4 +115,4 @@ def wait_for(cond: Callable[[], bool], timeout: float, what: str) -> None:
 
 
 __all__ = ["end", "end_children_of_run", "free_port", "hub_session", "kill_pid", "member_args",
-           "pid_alive", "start", "unique_ns", "wait_for"]
+           "pid_alive", "run_sim", "start", "unique_ns", "wait_for"]

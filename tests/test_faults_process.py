@@ -5,9 +5,6 @@ fourth robot joins; every assertion is on what the recording holds."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,23 +12,9 @@ import pytest
 from report.faults import coverage, coverage_ok
 from report.load import load_run
 from report.series import time_grid
-from tests.procutil import end, end_children_of_run, pid_alive
+from tests.procutil import pid_alive, run_sim
 
 CYCLE_S = 200.0  # the default common patrol cycle
-
-
-def run_sim(out: Path, *extra: str, timeout: float = 400) -> subprocess.CompletedProcess[str]:
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "btrack", "sim", "--out", str(out), "--localization", "truth",
-         *extra],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
-    )
-    try:
-        stdout, stderr = proc.communicate(timeout=timeout)
-    finally:
-        end(proc)
-        end_children_of_run(out)
-    return subprocess.CompletedProcess(proc.args, proc.returncode, stdout, stderr)
 
 
 def assert_every_tick_recorded(run, duration_s: float, dt: float = 0.1) -> None:
@@ -48,8 +31,9 @@ def membership_changes(run) -> np.ndarray:
 @pytest.fixture(scope="module")
 def kill_and_freeze(tmp_path_factory):
     out = tmp_path_factory.mktemp("faults") / "run"
-    result = run_sim(out, "--map", "half-algae", "--start", "ahead:1", "--duration", "1300",
-                     "--fault", "kill:2@150", "--fault", "freeze:1@700-730")
+    result = run_sim(out, "--localization", "truth", "--map", "half-algae", "--start",
+                     "ahead:1", "--duration", "1300", "--fault", "kill:2@150",
+                     "--fault", "freeze:1@700-730")
     assert result.returncode == 0, result.stderr[-3000:]
     return out, result
 
@@ -103,8 +87,9 @@ def test_workload_rebalanced_within_ten_cycles(kill_and_freeze):
 
 def test_chaos_with_a_fourth_robot_joining_keeps_the_edge_covered(tmp_path):
     out = tmp_path / "chaos"
-    result = run_sim(out, "--map", "random-algae", "--start", "in-phase", "--duration", "700",
-                     "--chaos", "7", "--fault", "join:3@150", "--no-report")
+    result = run_sim(out, "--localization", "truth", "--map", "random-algae", "--start",
+                     "in-phase", "--duration", "700", "--chaos", "7", "--fault", "join:3@150",
+                     "--no-report")
     assert result.returncode == 0, result.stderr[-3000:]
     pids = json.loads((out / "logs" / "pids.json").read_text())
     assert "agent3" in pids and not [n for n, pid in pids.items() if pid_alive(pid)]

@@ -116,7 +116,7 @@ def closed_loop(map_name: str, start: str, seconds: float):
         work_err.append([abs(w[i + 1] - w[i]) for i in range(2)])
         segments.append([(o.lo, o.hi) for o in outs])
         world.step({i: (o.v, o.omega) for i, o in enumerate(outs)}, 0.1)
-    return phase_err, work_err, segments
+    return phase_err, work_err, segments, ctrls
 
 
 def quarter_means(rows):
@@ -126,7 +126,7 @@ def quarter_means(rows):
 
 
 def test_core_closed_loop_half_algae_errors_shrink():
-    phase, work, segments = closed_loop("half-algae", "ahead:1", 600.0)
+    phase, work, segments, _ = closed_loop("half-algae", "ahead:1", 600.0)
     p1, p4 = quarter_means(phase)
     w1, w4 = quarter_means(work)
     assert p4 < p1 / 4 and w4 < w1 / 4, (p1, p4, w1, w4)
@@ -149,23 +149,8 @@ def test_depth_map_staleness_prefers_unsampled_bins_and_ignores_bin_sides():
 def test_random_profile_every_column_of_each_segment_gets_measured():
     """Sweeps place their in-legs on the stalest columns: after 900 s every bin of each
     robot's segment that lies wholly inside it holds a measurement within 5 cm."""
-    gmap = load_map("random-algae", 0.05, 1)
-    world = World(gmap, 3, "in-phase", seed=1)
-    info = world.info()
-    e0, e1, depth = info["edge_lo"], info["edge_hi"], info["patrol_depth"]
-    ctrls = [Controller(i, *initial_segment(i, 3, e0, e1), e0, e1, world.truth(i)[0])
-             for i in range(3)]
-    published = [None, None, None]
-    for _ in range(9000):
-        outs = []
-        for i, c in enumerate(ctrls):
-            r = world.sense(i)
-            x, y, th = world.truth(i)
-            outs.append(c.step(0.1, x, y, th, r.ice, r.algae,
-                               published[i - 1] if i > 0 else None,
-                               published[i + 1] if i < 2 else None, i > 0, i < 2))
-        published = [c.published for c in ctrls]
-        world.step({i: (o.v, o.omega) for i, o in enumerate(outs)}, 0.1)
+    *_, ctrls = closed_loop("random-algae", "in-phase", 900.0)
+    depth = load_map("random-algae", 0.05, 1).patrol_depth_bins(0.1)
     for c in ctrls:
         dm = c.depth_map
         whole = range(dm.bin_of(c.lo) + 1, dm.bin_of(c.hi))

@@ -9,29 +9,15 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
 
-from tests.procutil import end, end_children_of_run, pid_alive
+from tests.procutil import end, end_children_of_run, pid_alive, run_sim
 
 SUMMARY_KEYS = {
     "map", "start", "robots", "localization", "seed", "duration_s", "speedup", "phase_sse_rad",
     "phase_sse_path_rad", "phase_max_rad", "workload_sse_m2", "workload_max_m2", "converge_s",
 }
-
-
-def run_sim(out: Path, *extra: str, timeout: float = 240) -> subprocess.CompletedProcess[str]:
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "btrack", "sim", "--out", str(out), "--quiet", *extra],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
-    )
-    try:
-        stdout, stderr = proc.communicate(timeout=timeout)
-    finally:
-        end(proc)
-        end_children_of_run(out)
-    return subprocess.CompletedProcess(proc.args, proc.returncode, stdout, stderr)
 
 
 @pytest.fixture(scope="module")
