@@ -178,7 +178,7 @@ class Injector:
                 if f.kind == "kill":
                     self.gone.add(child.pid)
             pid = child.pid if child is not None else 0
-            self.pub.put(encode(WireFault(self.t, f.kind, f.agent, pid)))
+            self.pub.put(encode(WireFault(self.t, f.kind, f.agent, pid, time.time_ns())))
             lines.append(f"t = {self.t:7.1f} s: {f.kind} agent {f.agent} (pid {pid}), "
                          f"scheduled at {f.at_s:g} s")
         self._next_at = (self.schedule[self.done].at_s if self.done < len(self.schedule)

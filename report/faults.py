@@ -118,12 +118,14 @@ def fault_measures(run: RunData, series: ErrorSeries, gap: np.ndarray, band: flo
 
 
 def _wall_delay(run: RunData, fault: dict[str, Any], detected: float) -> float:
-    """Wall seconds between the fault (as the recorder logged it) and the tick at
-    which it was detected."""
+    """Wall seconds between the fault (the launcher's clock when it acted, else when
+    the recorder got the news) and the recorder's receipt of the tick at which it was
+    detected. Both clocks are this machine's: simulation only."""
     if not math.isfinite(detected) or run.tick_t.size == 0:
         return math.nan
     k = min(int(np.searchsorted(run.tick_t, detected)), run.tick_t.size - 1)
-    return max(0.0, float(run.tick_log_ns[k] - int(fault["log_ns"])) / 1e9)
+    acted = int(fault.get("wall_ns") or fault["log_ns"])
+    return max(0.0, float(run.tick_log_ns[k] - acted) / 1e9)
 
 
 def coverage_ok(gap: np.ndarray, overlap: np.ndarray, tol_m: float = 1e-6) -> np.ndarray:

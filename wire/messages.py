@@ -178,9 +178,11 @@ class Fault:
     kind: str
     agent: int
     pid: int = 0  # the process the signal went to, or the new process
+    wall_ns: int = 0  # the launcher's wall clock when it acted (for detection delays)
 
     def check(self) -> None:
-        _require(self.t >= 0 and self.agent >= 0 and self.pid >= 0, "negative t, agent or pid")
+        _require(self.t >= 0 and self.agent >= 0 and self.pid >= 0 and self.wall_ns >= 0,
+                 "negative t, agent, pid or wall time")
         _require(self.kind in FAULT_KINDS, f"unknown fault kind {self.kind!r}")
 
 
