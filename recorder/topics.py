@@ -23,6 +23,7 @@ _ROBOT_TOPICS: dict[tuple[str, str], type] = {
 _FIXED_TOPICS: dict[str, type] = {
     "world/tick": messages.Tick,
     "world/info": messages.WorldInfo,
+    "laser/scan": messages.Scan,
 }
 
 
