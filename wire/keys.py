@@ -51,6 +51,9 @@ class Keys:
     def alive_recorder(self) -> str:
         return f"{self.ns}/alive/recorder"
 
+    def alive_localizer(self) -> str:
+        return f"{self.ns}/alive/localizer"
+
     def world_tick(self) -> str:
         return f"{self.ns}/world/tick"
 
