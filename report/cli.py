@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from report.load import LoadError, load_run
+from report.localization import localization_errors, summary_stats
 from report.measures import steady_state
 from report.series import error_series
 from report.summary import (
@@ -37,6 +38,8 @@ ROWS = (
     ("revisit_worst_s", "revisit time, worst (s)"),
     ("revisit_ideal_s", "revisit time, ideal (s)"),
     ("speedup", "speed-up (simulated / wall time)"),
+    ("loc_error_mean_m", "localisation error of the agents' poses, mean (m)"),
+    ("loc_error_p95_m", "localisation error of the agents' poses, 95th percentile (m)"),
     ("ticks", "ticks recorded"),
     ("invalid_messages", "invalid messages"),
 )
@@ -81,7 +84,10 @@ def report_markdown(
         "",
         "![map](map.png)",
         "",
-        "Figures: [errors.png](errors.png), [map.png](map.png); numbers: "
+        "![localization](localization.png)",
+        "",
+        "Figures: [errors.png](errors.png), [map.png](map.png), "
+        "[localization.png](localization.png); numbers: "
         "[summary.json](summary.json).",
         "",
     ]
@@ -95,20 +101,33 @@ def make_report(
 ) -> dict[str, Any]:
     """Write summary.json, errors.png, map.png and report.md into ``run_dir``; return the
     summary. Raises ``LoadError`` if run_dir/run.mcap is missing or unreadable."""
-    from report.figures import errors_figure, map_figure  # matplotlib only when drawing
+    from report.figures import (  # matplotlib only when drawing
+        errors_figure,
+        localization_figure,
+        map_figure,
+    )
 
     run_dir = Path(run_dir)
     run = load_run(run_dir / "run.mcap")
     series = error_series(run)
-    summary = compute_summary(run, series, phase_band, workload_band)
+    loc = localization_errors(run)
+    summary = compute_summary(run, series, phase_band, workload_band, loc)
     write_summary(run_dir / "summary.json", summary)
     errors_figure(series, run_dir / "errors.png")
     map_figure(run, run_dir / "map.png")
+    localization_figure(loc, run_dir / "localization.png", summary.get("localization"))
     agents_sse, agents_max = steady_state(series.t, series.workload_agents)
     extra = {
         "workload steady-state error, agents' own estimates (m^2)": json_safe(agents_sse),
         "workload error, agents' own, max over last quarter (m^2)": json_safe(agents_max),
     }
+    for rid in sorted(loc.t):
+        for which, label in (("pf", "poses given"), ("odometry", "odometry alone")):
+            errors = getattr(loc, which).get(rid)
+            if errors is not None:
+                mean, p95 = summary_stats(errors)
+                extra[f"robot {rid} localisation error, {label}, mean / p95 (m)"] = (
+                    f"{_fmt(json_safe(mean))} / {_fmt(json_safe(p95))}")
     markdown = report_markdown(summary, phase_band, workload_band, extra)
     (run_dir / "report.md").write_text(markdown)
     return summary

@@ -11,6 +11,7 @@ import numpy as np
 
 from report import measures as m
 from report.load import RunData
+from report.localization import LocErrors, localization_errors, summary_stats
 from report.series import ErrorSeries, error_series, time_grid
 
 PHASE_BAND_RAD = 0.15
@@ -44,6 +45,8 @@ KEYS = (
     "workload_q4_m2",
     "ticks",
     "invalid_messages",
+    "loc_error_mean_m",
+    "loc_error_p95_m",
 )
 
 
@@ -108,9 +111,11 @@ def compute_summary(
     series: ErrorSeries | None = None,
     phase_band: float = PHASE_BAND_RAD,
     workload_band: float = WORKLOAD_BAND_M2,
+    loc: LocErrors | None = None,
 ) -> dict[str, Any]:
     """Every measure of the run, keyed as in ``KEYS`` (NaN where it cannot be computed)."""
     s = error_series(run) if series is None else series
+    loc_mean, loc_p95 = summary_stats((loc or localization_errors(run)).pooled("pf"))
     info = run.info
     phase_sse, phase_max = m.steady_state(s.t, s.phase)
     path_sse, _ = m.steady_state(s.t, s.phase_path)
@@ -143,6 +148,8 @@ def compute_summary(
         "workload_q4_m2": m.window_abs(s.t, s.workload, 0.75, 1.0)[0],
         "ticks": int(run.tick_t.size),
         "invalid_messages": int(run.invalid),
+        "loc_error_mean_m": loc_mean,
+        "loc_error_p95_m": loc_p95,
     }
     assert tuple(out) == KEYS
     return json_safe(out)
