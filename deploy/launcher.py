@@ -207,7 +207,10 @@ def _watch(args: argparse.Namespace, group: ProcessGroup, monitor: Monitor, worl
         except Exception:
             pass
         for child in (*agents, recorder):
-            if not child.alive():
+            # the recorder ends by itself (code 0) once it has the final tick, which
+            # can be before the world's own exit is seen here
+            done = child is recorder and child.proc.returncode == 0
+            if not child.alive() and not done:
                 return _fail(group, child, "exited early")
         monitor.drain()
         now = time.monotonic()
