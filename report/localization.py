@@ -47,12 +47,14 @@ def dead_reckon(x0: float, y0: float, th0: float, dist: np.ndarray,
 
 
 def _error_at(track: Truth, t: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """|track - (x, y)| at the track's own times that are in t (exact tick times)."""
-    idx = np.clip(np.searchsorted(t, track.t), 0, max(t.size - 1, 0))
-    out = np.full(track.t.size, math.nan)
-    if t.size:
-        same = np.isclose(t[idx], track.t, rtol=0.0, atol=1e-9)
-        out[same] = np.hypot(track.x[same] - x[idx[same]], track.y[same] - y[idx[same]])
+    """|track - (x, y)| at each time of ``t`` (the truth's ticks) where the track has a
+    sample at that very time; NaN elsewhere."""
+    out = np.full(t.size, math.nan)
+    if track.t.size == 0:
+        return out
+    idx = np.clip(np.searchsorted(track.t, t), 0, track.t.size - 1)
+    same = np.isclose(track.t[idx], t, rtol=0.0, atol=1e-9)
+    out[same] = np.hypot(track.x[idx[same]] - x[same], track.y[idx[same]] - y[same])
     return out
 
 
