@@ -209,8 +209,7 @@ def _watch(args: argparse.Namespace, group: ProcessGroup, monitor: Monitor, worl
         for child in (*agents, recorder):
             # the recorder ends by itself (code 0) once it has the final tick, which
             # can be before the world's own exit is seen here
-            done = child is recorder and child.proc.returncode == 0
-            if not child.alive() and not done:
+            if not child.alive() and not (child is recorder and child.proc.returncode == 0):
                 return _fail(group, child, "exited early")
         monitor.drain()
         now = time.monotonic()
