@@ -15,6 +15,7 @@ from localizer.core import (
     Localizer,
     ScanGeometry,
     assign,
+    blob_centre,
     measure_centres,
     split_blobs,
     systematic_resample,
@@ -39,6 +40,15 @@ def test_lone_robot_centre_within_a_centimetre(centre: tuple[float, float]) -> N
         assert found.shape == (1, 2)
         errors.append(math.dist(found[0], centre))
     assert np.mean(errors) < 0.01 and max(errors) < 0.02  # 1 cm range noise, 4 m away
+
+
+def test_all_blobs_at_once_equal_one_blob_at_a_time() -> None:
+    centres = [(0.5, -1.0), (1.5, 0.5), (2.9, 0.0), (3.1, 1.0), (4.5, 1.5), (5.5, -0.5)]
+    ranges = scan_of(Laser(SCANNER, seed=9), centres)
+    config = FilterConfig()
+    one_by_one = [c for b in split_blobs(ranges, GEOMETRY, config.jump_m)
+                  if (c := blob_centre(ranges, GEOMETRY, b, config)) is not None]
+    assert np.allclose(measure_centres(ranges, GEOMETRY, config), one_by_one, atol=1e-9)
 
 
 def test_thesis_estimate_alone_is_close_too() -> None:
