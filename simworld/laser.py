@@ -16,6 +16,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 
 LMS_BEAMS = 361
 LMS_ANGLE_MIN = -0.5 * math.pi
@@ -61,7 +62,7 @@ class Laser:
         world = s.theta + s.angles()
         self._dirs = np.stack([np.cos(world), np.sin(world)], axis=1)  # (beams, 2)
 
-    def exact(self, centres: np.ndarray) -> np.ndarray:
+    def exact(self, centres: npt.ArrayLike) -> np.ndarray:
         """Noise-free ranges to the nearest robot or wall along every beam
         (``range_max`` where nothing is hit within range)."""
         s = self.scanner
@@ -90,7 +91,7 @@ class Laser:
         ok = (np.abs(den) > 1e-12) & (t > 0.0) & (s >= 0.0) & (s <= 1.0)
         return np.where(ok, t, np.inf)
 
-    def scan(self, centres: np.ndarray) -> list[float]:
+    def scan(self, centres: npt.ArrayLike) -> list[float]:
         """One noisy scan: ranges in metres, millimetre resolution, misses at max."""
         s = self.scanner
         exact = self.exact(centres)
