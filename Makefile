@@ -20,7 +20,7 @@ test: $(STAMP)
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
-	$(BIN)/mypy agent wire
+	$(BIN)/mypy agent wire localizer
 
 bench: $(STAMP)
 	$(BIN)/python bench/speed.py

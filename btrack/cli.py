@@ -13,6 +13,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "sim": ("deploy.launcher", "run a simulated team: world, recorder and N agents"),
     "agent": ("agent.process", "one robot's controller (meant for the robot's own computer)"),
     "world": ("simworld.process", "the simulator: maps, kinematics, sensors, the clock"),
+    "localizer": ("localizer.process", "laser localisation: one particle filter per robot"),
     "record": ("recorder.process", "record everything on the bus into an MCAP file"),
     "report": ("report.cli", "measures, summary.json and figures from a recorded run"),
     "suite": ("deploy.suite", "the thesis's twelve cases, each a full team, and its tables"),
@@ -23,7 +24,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
 
 def usage() -> str:
     lines = ["usage: btrack COMMAND [options]   (btrack COMMAND --help for each)", "", "commands:"]
-    lines += [f"  {name:<8} {help_}" for name, (_, help_) in COMMANDS.items()]
+    lines += [f"  {name:<9} {help_}" for name, (_, help_) in COMMANDS.items()]
     return "\n".join(lines)
 
 

@@ -1,9 +1,9 @@
 """``btrack sim``: a simulated team on this machine, every part its own OS process.
 
-It starts the recorder, N agents and the world (each a subprocess speaking Zenoh
-on loopback under a fresh run namespace), shows progress while the world runs,
-ends every process it started (on finish, on error and on Ctrl-C) and writes the
-report from the recording.
+It starts the recorder, N agents, the localizer (``--localization pf``) and the
+world (each a subprocess speaking Zenoh on loopback under a fresh run namespace),
+shows progress while the world runs, ends every process it started (on finish, on
+error and on Ctrl-C) and writes the report from the recording.
 """
 
 from __future__ import annotations
@@ -42,12 +42,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scale", type=float, default=0.05, help="PNG map metres per pixel")
     p.add_argument("--start", default="ahead:1",
                    help="in-phase | ahead:K (robot K starts 72 deg ahead; default ahead:1)")
-    p.add_argument("--localization", choices=["truth", "odometry"], default="truth",
-                   help="where agents' poses come from (default truth)")
+    p.add_argument("--localization", choices=["pf", "truth", "odometry"], default="pf",
+                   help="where agents' poses come from: pf (the localizer's particle "
+                   "filters on laser scans), truth or odometry (default pf)")
     p.add_argument("--duration", type=float, default=900.0, help="simulated seconds (900)")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--out", type=Path, help="output directory (default runs/<time>)")
     p.add_argument("--realtime", action="store_true", help="pace the world on the wall clock")
+    p.add_argument("--kidnap", action="append", default=[], metavar="ROBOT@T:DX,DY",
+                   help="the world carries robot ROBOT by (DX, DY) m at time T (repeatable)")
     p.add_argument("--config", metavar="FILE.toml", help="agent configuration for every agent")
     p.add_argument("--k-s", type=float, help="workload gain K_s per tick (eq. 4.3)")
     p.add_argument("--k-phi", type=float, help="phase consensus gain K_phi (eq. 4.7)")
@@ -250,6 +253,10 @@ def run(args: argparse.Namespace) -> int:
             injector = Injector(session, keys, schedule, group, agent_args)
             for i in range(args.robots):
                 injector.start_agent(i)
+            vital = []  # processes the run cannot go on without
+            if args.localization == "pf":
+                vital.append(group.start("localizer", [
+                    "localizer", "--robots", str(bodies), "--seed", str(args.seed), *member]))
             if schedule and not args.quiet:
                 print("btrack sim: faults: " + ", ".join(
                     f"{f.kind}:{f.agent}@{f.at_s:g}" for f in schedule))
@@ -260,8 +267,10 @@ def run(args: argparse.Namespace) -> int:
                           "--seed", str(args.seed), "--wait-recorder", *member]
             if args.realtime:
                 world_args.append("--realtime")
+            for spec in args.kidnap:
+                world_args += ["--kidnap", spec]
             world = group.start("world", world_args)
-            code = _watch(args, group, monitor, world, injector, recorder)
+            code = _watch(args, group, monitor, world, injector, recorder, vital)
             if code:
                 return code
             try:
@@ -288,7 +297,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _watch(args: argparse.Namespace, group: ProcessGroup, monitor: Monitor, world: Child,
-           injector: Injector, recorder: Child) -> int:
+           injector: Injector, recorder: Child, vital: list[Child]) -> int:
     """Show progress and inject faults until the world ends; fail fast if a process
     dies that was not killed on purpose."""
     last_print = time.monotonic()
@@ -304,7 +313,8 @@ def _watch(args: argparse.Namespace, group: ProcessGroup, monitor: Monitor, worl
             monitor.drain()  # the recorder ends by itself once it has the final tick
             if monitor.tick is not None and monitor.tick.done:
                 continue
-        dead = injector.unexpected_exit() or (None if recorder.alive() else recorder)
+        dead = injector.unexpected_exit() or (None if recorder.alive() else recorder) or next(
+            (c for c in vital if not c.alive()), None)
         if dead is not None:
             return _fail(group, dead, "exited early")
         monitor.drain()

@@ -24,6 +24,7 @@ _FIXED_TOPICS: dict[str, type] = {
     "world/tick": messages.Tick,
     "world/info": messages.WorldInfo,
     "fault": messages.Fault,
+    "laser/scan": messages.Scan,
 }
 
 

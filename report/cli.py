@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from report.load import LoadError, load_run
+from report.localization import localization_errors, summary_stats
 from report.measures import steady_state
 from report.series import error_series, time_grid
 from report.summary import (
@@ -39,6 +40,8 @@ ROWS = (
     ("revisit_worst_s", "revisit time, worst (s)"),
     ("revisit_ideal_s", "revisit time, ideal (s)"),
     ("speedup", "speed-up (simulated / wall time)"),
+    ("loc_error_mean_m", "localisation error of the agents' poses, mean (m)"),
+    ("loc_error_p95_m", "localisation error of the agents' poses, 95th percentile (m)"),
     ("ticks", "ticks recorded"),
     ("invalid_messages", "invalid messages"),
     ("coverage_gap_m_s", "edge owned by no live agent, integrated (m s)"),
@@ -88,8 +91,11 @@ def report_markdown(
         "",
         "![revisit](revisit.png)",
         "",
+        "![localization](localization.png)",
+        "",
         "Figures: [errors.png](errors.png), [boundaries.png](boundaries.png), "
-        "[map.png](map.png), [revisit.png](revisit.png); numbers: "
+        "[map.png](map.png), [revisit.png](revisit.png), "
+        "[localization.png](localization.png); numbers: "
         "[summary.json](summary.json).",
         "",
     ]
@@ -135,6 +141,7 @@ def make_report(
     from report.figures import (  # matplotlib only when drawing
         boundaries_figure,
         errors_figure,
+        localization_figure,
         map_figure,
         revisit_figure,
     )
@@ -143,17 +150,26 @@ def make_report(
     run = load_run(run_dir / "run.mcap")
     series = error_series(run)
     rev = revisit(run, time_grid(run))
-    summary = compute_summary(run, series, phase_band, workload_band, rev)
+    loc = localization_errors(run)
+    summary = compute_summary(run, series, phase_band, workload_band, rev, loc)
     write_summary(run_dir / "summary.json", summary)
     errors_figure(series, run_dir / "errors.png", run)
     map_figure(run, run_dir / "map.png")
     boundaries_figure(run, run_dir / "boundaries.png")
     revisit_figure(rev, run_dir / "revisit.png")
+    localization_figure(loc, run_dir / "localization.png", summary.get("localization"))
     agents_sse, agents_max = steady_state(series.t, series.workload_agents)
     extra = {
         "workload steady-state error, agents' own estimates (m^2)": json_safe(agents_sse),
         "workload error, agents' own, max over last quarter (m^2)": json_safe(agents_max),
     }
+    for rid in sorted(loc.t):
+        for which, label in (("pf", "poses given"), ("odometry", "odometry alone")):
+            errors = getattr(loc, which).get(rid)
+            if errors is not None:
+                mean, p95 = summary_stats(errors)
+                extra[f"robot {rid} localisation error, {label}, mean / p95 (m)"] = (
+                    f"{_fmt(json_safe(mean))} / {_fmt(json_safe(p95))}")
     markdown = report_markdown(summary, phase_band, workload_band, extra)
     markdown += faults_markdown(summary.get("faults") or [])
     (run_dir / "report.md").write_text(markdown)

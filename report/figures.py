@@ -16,6 +16,7 @@ import numpy as np  # noqa: E402
 from matplotlib.patches import Patch, Rectangle  # noqa: E402
 
 from report.load import RunData  # noqa: E402
+from report.localization import LocErrors  # noqa: E402
 from report.measures import hold  # noqa: E402
 from report.series import ErrorSeries, live_matrix, time_grid  # noqa: E402
 from report.summary import Revisit  # noqa: E402
@@ -196,6 +197,34 @@ def revisit_figure(rev: Revisit | None, path: str | Path) -> None:
     ax.set_xlabel("position along the edge (m)")
     ax.set_ylabel("time between visits (s)")
     ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def localization_figure(loc: LocErrors, path: str | Path, source: str | None = None) -> None:
+    """Position error against truth per robot over time: the poses the agents were
+    given (solid) and odometry alone for the same run (dashed)."""
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for j, rid in enumerate(sorted(loc.t)):
+        c = colours[j % len(colours)]
+        t = loc.t[rid]
+        step = _thin(t.size)
+        if rid in loc.pf:
+            ax.plot(t[step], loc.pf[rid][step], color=c, lw=1.0,
+                    label=f"robot {rid}, {source or 'given'} poses")
+        if rid in loc.odometry:
+            ax.plot(t[step], loc.odometry[rid][step], color=c, lw=0.9, ls="--",
+                    label=f"robot {rid}, odometry alone")
+    ax.set_yscale("log")
+    ax.set_ylim(1e-4, 10.0)
+    ax.set_title("Localisation error against truth")
+    ax.set_xlabel("simulation time (s)")
+    ax.set_ylabel("position error (m)")
+    ax.grid(True, which="both", alpha=0.3)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(loc="upper left", fontsize=7, ncol=2)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

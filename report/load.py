@@ -14,6 +14,7 @@ from mcap.reader import make_reader
 STATE_FIELDS = ("t", "lo", "hi", "phase", "phase_des", "workload", "depth_avg", "direction",
                 "lower", "upper")
 TRUTH_FIELDS = ("t", "x", "y", "theta")
+ODOM_FIELDS = ("t", "odom_dist_m", "odom_dtheta")
 
 
 class LoadError(Exception):
@@ -57,6 +58,8 @@ class RunData:
     states: dict[int, States] = field(default_factory=dict)
     invalid: int = 0
     alive: dict[int, list[tuple[int, bool]]] = field(default_factory=dict)  # (log ns, alive)
+    poses: dict[int, Truth] = field(default_factory=dict)  # the poses the agents were given
+    odometry: dict[int, np.ndarray] = field(default_factory=dict)  # rows t, dist, dtheta
 
     @property
     def robot_ids(self) -> list[int]:
@@ -88,6 +91,8 @@ def load_run(path: str | Path) -> RunData:
     truth: dict[int, list[tuple[float, ...]]] = defaultdict(list)
     states: dict[int, list[tuple[float, ...]]] = defaultdict(list)
     alive: dict[int, list[tuple[int, bool]]] = defaultdict(list)
+    poses: dict[int, list[tuple[float, ...]]] = defaultdict(list)
+    odometry: dict[int, list[tuple[float, ...]]] = defaultdict(list)
     invalid = 0
     try:
         with open(path, "rb") as stream:
@@ -110,6 +115,12 @@ def load_run(path: str | Path) -> RunData:
                 elif topic.endswith("/state") and topic.startswith("agent/"):
                     msg = json.loads(message.data)
                     states[int(msg["robot"])].append(tuple(msg[f] for f in STATE_FIELDS))
+                elif topic.endswith("/pose") and topic.startswith("robot/"):
+                    msg = json.loads(message.data)
+                    poses[int(msg["robot"])].append(tuple(msg[f] for f in TRUTH_FIELDS))
+                elif topic.endswith("/sense") and topic.startswith("robot/"):
+                    msg = json.loads(message.data)
+                    odometry[int(msg["robot"])].append(tuple(msg[f] for f in ODOM_FIELDS))
                 elif topic == "world/info":
                     info = json.loads(message.data)
                 elif topic.startswith("alive/agent/"):
@@ -136,4 +147,9 @@ def load_run(path: str | Path) -> RunData:
         states={r: States(**_columns(rows, STATE_FIELDS)) for r, rows in states.items()},
         invalid=invalid,
         alive={r: sorted(ev) for r, ev in alive.items()},
+        poses={r: Truth(**_columns(rows, TRUTH_FIELDS)) for r, rows in poses.items()},
+        odometry={
+            r: np.stack(list(_columns(rows, ODOM_FIELDS).values()))
+            for r, rows in odometry.items()
+        },
     )

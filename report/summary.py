@@ -13,6 +13,7 @@ import numpy as np
 from report import measures as m
 from report.faults import coverage, fault_measures
 from report.load import RunData
+from report.localization import LocErrors, localization_errors, summary_stats
 from report.series import ErrorSeries, error_series, time_grid
 
 PHASE_BAND_RAD = 0.15
@@ -48,6 +49,8 @@ KEYS = (
     "invalid_messages",
     "coverage_gap_m_s",
     "faults",
+    "loc_error_mean_m",
+    "loc_error_p95_m",
 )
 
 
@@ -138,10 +141,12 @@ def compute_summary(
     phase_band: float = PHASE_BAND_RAD,
     workload_band: float = WORKLOAD_BAND_M2,
     rev: Revisit | None = None,
+    loc: LocErrors | None = None,
 ) -> dict[str, Any]:
     """Every measure of the run, keyed as in ``KEYS`` (NaN where it cannot be computed).
     ``rev``: the run's revisit times, if already computed."""
     s = error_series(run) if series is None else series
+    loc_mean, loc_p95 = summary_stats((loc or localization_errors(run)).pooled("pf"))
     info = run.info
     phase_sse, phase_max = m.steady_state(s.t, s.phase)
     path_sse, _ = m.steady_state(s.t, s.phase_path)
@@ -179,6 +184,8 @@ def compute_summary(
         "invalid_messages": int(run.invalid),
         "coverage_gap_m_s": _integral(s.t, gap),
         "faults": fault_measures(run, s, gap, workload_band, CONVERGE_SMOOTH_S),
+        "loc_error_mean_m": loc_mean,
+        "loc_error_p95_m": loc_p95,
     }
     assert tuple(out) == KEYS
     return json_safe(out)

@@ -1,9 +1,14 @@
 """``btrack world``: the simulator process, the run's clock (DESIGN.md "Time").
 
-Lockstep (default): tick k publishes every robot's Truth, Pose and Sense (Sense last),
-waits for tick k's Cmd from every live agent (a dead agent is not waited for, a silent
-one at most ``--cmd-timeout``), publishes the Tick and steps the world. ``--realtime``
-paces ticks on the wall clock instead and uses each robot's latest command.
+Lockstep (default): tick k publishes every robot's Truth and Pose, the laser Scan, and
+every robot's Sense (Sense last), waits for tick k's Cmd from every live agent (a dead
+agent is not waited for, a silent one at most ``--cmd-timeout``), publishes the Tick
+and steps the world. ``--realtime`` paces ticks on the wall clock instead and uses each
+robot's latest command.
+With ``--localization pf`` the world publishes no Pose: the localizer turns tick k's
+Scan and Sense into tick k's poses, the agents act on them, and the world, which
+waited for the localizer's liveliness before tick 0, waits for their commands as
+usual. Scans come at the control rate (one per tick).
 Membership is Zenoh liveliness on ``keys.alive('*')``. Zenoh callbacks only push into
 a queue; everything else happens on the main thread.
 """
@@ -25,9 +30,22 @@ from typing import Any
 
 import zenoh
 
-from simworld.maps import MapError, load_map
-from simworld.world import World, parse_start
-from wire import Cmd, DecodeError, Keys, Pose, Sense, Tick, Truth, WorldInfo, decode, encode
+from simworld.laser import Laser, Scanner, box_walls
+from simworld.maps import LASER_ROOM_M, ROBOT_ROOM_M, MapError, load_map
+from simworld.world import ROBOT_RADIUS_M, World, parse_start
+from wire import (
+    Cmd,
+    DecodeError,
+    Keys,
+    Pose,
+    Scan,
+    Sense,
+    Tick,
+    Truth,
+    WorldInfo,
+    decode,
+    encode,
+)
 from wire.session import (
     SessionOptions,
     add_session_args,
@@ -43,6 +61,7 @@ CLOSE_TIMEOUT_S = 3.0
 
 # queue items, built on Zenoh threads: (kind, key, payload-or-flag)
 _ALIVE, _RECORDER, _CMD, _STOP = "alive", "recorder", "cmd", "stop"
+_LOCALIZER = "localizer"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -62,9 +81,29 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--start", default="in-phase", help="in-phase | ahead:K (default in-phase)")
     p.add_argument(
         "--localization",
-        choices=["truth", "odometry"],
+        choices=["truth", "odometry", "pf"],
         default="truth",
-        help="what the world publishes as each robot's Pose (default truth)",
+        help="what the world publishes as each robot's Pose (default truth); pf: none, "
+        "it publishes laser scans and waits for the localizer",
+    )
+    p.add_argument(
+        "--laser-noise",
+        type=float,
+        default=0.01,
+        help="laser range noise, std in m (0.01)",
+    )
+    p.add_argument(
+        "--walls",
+        action="store_true",
+        help="walls around the scene for the laser (a box 1 m beyond the edge's ends)",
+    )
+    p.add_argument(
+        "--kidnap",
+        action="append",
+        default=[],
+        metavar="ROBOT@T:DX,DY",
+        help="carry robot ROBOT by (DX, DY) m at simulated time T s, odometry unaware "
+        "(repeatable)",
     )
     p.add_argument("--duration", type=float, default=600.0, help="simulated seconds (600)")
     p.add_argument("--seed", type=int, default=1, help="seed of the map and the noise (1)")
@@ -127,6 +166,15 @@ class WorldProcess:
         self.events: queue.SimpleQueue[tuple[str, str, Any]] = queue.SimpleQueue()
         self.live: set[int] = set()
         self.recorder_alive = False
+        self.localizer_alive = False
+        self.laser: Laser | None = None
+        if args.localization == "pf":
+            lo, hi = world.map.edge_lo, world.map.edge_hi
+            scanner = Scanner(0.5 * (lo + hi), -(ROBOT_ROOM_M + LASER_ROOM_M))
+            walls = box_walls(lo - 1.0, scanner.y - 0.5, hi + 1.0, world.map.y_top) \
+                if args.walls else []
+            self.laser = Laser(scanner, ROBOT_RADIUS_M, args.laser_noise, walls, args.seed)
+        self.kidnaps = parse_kidnaps(args.kidnap, self.dt)
         self.dropped = 0
         self.timeouts = 0
         self.stopping = False
@@ -140,6 +188,7 @@ class WorldProcess:
         self.pub_truth = [pub(k.truth(i)) for i in range(self.n)]
         self.pub_pose = [pub(k.pose(i)) for i in range(self.n)]
         self.pub_sense = [pub(k.sense(i)) for i in range(self.n)]
+        self.pub_scan = pub(k.scan())
         self.pub_tick = pub(k.world_tick())
         self.pub_info = pub(k.world_info())
         put = self.events.put
@@ -155,6 +204,11 @@ class WorldProcess:
             session.liveliness().declare_subscriber(
                 k.alive_recorder(),
                 lambda s: put((_RECORDER, str(s.key_expr), s.kind == zenoh.SampleKind.PUT)),
+                history=True,
+            ),
+            session.liveliness().declare_subscriber(
+                k.alive_localizer(),
+                lambda s: put((_LOCALIZER, str(s.key_expr), s.kind == zenoh.SampleKind.PUT)),
                 history=True,
             ),
         ]
@@ -188,6 +242,9 @@ class WorldProcess:
                 log.info("agent %d %s", robot, "alive" if value else "gone")
         elif kind == _RECORDER:
             self.recorder_alive = bool(value)
+        elif kind == _LOCALIZER:
+            self.localizer_alive = bool(value)
+            log.info("localizer %s", "alive" if value else "gone")
         return None
 
     def _drop(self, key: str, why: str) -> None:
@@ -213,15 +270,27 @@ class WorldProcess:
 
     def publish_sensing(self, k: int, t: float) -> None:
         world, dt, lo, hi = self.world, self.dt, self.edge_lo, self.edge_hi
+        for robot, dx, dy in self.kidnaps.pop(k, []):
+            world.move(robot, dx, dy)
+            log.warning("tick %d: robot %d carried by (%g, %g) m", k, robot, dx, dy)
         odometry = self.pose_source == "odometry"
         for i in range(self.n):
             x, y, th = world.truth(i)
             self.pub_truth[i].put(encode(Truth(t, k, i, x, y, th)))
+            if self.laser is not None:
+                continue  # the localizer publishes the poses
             if odometry:
                 px, py, pth = world.odometry_pose(i)
             else:
                 px, py, pth = x, y, th
             self.pub_pose[i].put(encode(Pose(t, k, i, px, py, pth, source=self.pose_source)))
+        if self.laser is not None:
+            s = self.laser.scanner
+            centres = [world.truth(i)[:2] for i in range(self.n)]
+            ranges = self.laser.scan(centres)
+            self.pub_scan.put(encode(Scan(t, k, ranges, s.x, s.y, s.theta, s.angle_min,
+                                          s.angle_step, s.range_max)))
+        for i in range(self.n):
             r = world.sense(i)
             sense = Sense(t, k, i, r.ice, r.algae, r.odom_dist_m, r.odom_dtheta, lo, hi, dt)
             self.pub_sense[i].put(encode(sense))  # last: an agent may act on its Sense
@@ -231,7 +300,9 @@ class WorldProcess:
         """Block until all n agents (and the recorder if asked) are alive."""
         deadline = time.monotonic() + self.args.startup_timeout
         while not self.stopping:
-            if self.live >= self.team and (self.recorder_alive or not self.args.wait_recorder):
+            recorder_ok = self.recorder_alive or not self.args.wait_recorder
+            localizer_ok = self.localizer_alive or self.laser is None
+            if self.live >= self.team and recorder_ok and localizer_ok:
                 return True
             remaining = deadline - time.monotonic()
             if remaining <= 0:
@@ -242,7 +313,9 @@ class WorldProcess:
                 break
         if not self.stopping:
             missing = sorted(self.team - self.live)
-            what = f"agents {missing}" if missing else "the recorder"
+            what = f"agents {missing}" if missing else (
+                "the recorder" if not self.recorder_alive and self.args.wait_recorder
+                else "the localizer")
             print(
                 f"btrack world: {what} not alive after {self.args.startup_timeout:g} s",
                 file=sys.stderr,
@@ -323,6 +396,23 @@ class WorldProcess:
         return k
 
 
+def parse_kidnaps(specs: list[str], dt: float) -> dict[int, list[tuple[int, float, float]]]:
+    """``ROBOT@T:DX,DY`` options by tick: {k: [(robot, dx, dy), ...]}; ValueError."""
+    out: dict[int, list[tuple[int, float, float]]] = {}
+    for spec in specs:
+        try:
+            robot_s, rest = spec.split("@", 1)
+            t_s, move = rest.split(":", 1)
+            dx_s, dy_s = move.split(",", 1)
+            robot, t, dx, dy = int(robot_s), float(t_s), float(dx_s), float(dy_s)
+        except ValueError:
+            raise ValueError(f"bad --kidnap {spec!r}: use ROBOT@T:DX,DY") from None
+        if robot < 0 or t < 0:
+            raise ValueError(f"bad --kidnap {spec!r}: negative robot or time")
+        out.setdefault(round(t / dt), []).append((robot, dx, dy))
+    return out
+
+
 def _check_args(args: argparse.Namespace) -> str | None:
     if args.robots < 1:
         return "--robots must be at least 1"
@@ -332,6 +422,14 @@ def _check_args(args: argparse.Namespace) -> str | None:
         return "--dt and --duration must be positive"
     if args.odom_noise < 0 or args.cmd_timeout < 0 or args.startup_timeout < 0:
         return "--odom-noise, --cmd-timeout and --startup-timeout must be >= 0"
+    if args.laser_noise < 0:
+        return "--laser-noise must be >= 0"
+    try:
+        kidnaps = parse_kidnaps(args.kidnap, args.dt)
+    except ValueError as exc:
+        return str(exc)
+    if any(r >= args.robots for moves in kidnaps.values() for r, _, _ in moves):
+        return "--kidnap: no such robot"
     try:
         parse_start(args.start, args.team or args.robots)
     except ValueError as exc:

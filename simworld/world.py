@@ -113,6 +113,11 @@ class World:
         """Dead-reckoned pose from the noisy odometry, from the true start pose."""
         return self._ox[i], self._oy[i], self._oth[i]
 
+    def move(self, i: int, dx: float, dy: float) -> None:
+        """Carry robot i by (dx, dy) without its odometry noticing (a kidnapping)."""
+        self._x[i] += dx
+        self._y[i] += dy
+
     def sense(self, i: int) -> Reading:
         x, y = self._x[i], self._y[i]
         return Reading(

@@ -81,6 +81,8 @@ def _coerce(name: str, value: Any, hint: Any) -> Any:
         (item,) = typing.get_args(hint)
         if not isinstance(value, (list, tuple)):
             raise DecodeError(f"{name}: expected a list, got {type(value).__name__}")
+        if item is float and all(type(v) is float and v - v == 0.0 for v in value):
+            return list(value)  # the common case (a scan's ranges), checked cheaply
         return [_coerce(f"{name}[{i}]", v, item) for i, v in enumerate(value)]
     raise DecodeError(f"{name}: unsupported field type {hint}")  # pragma: no cover
 

@@ -32,6 +32,10 @@ class Keys:
     def cmd(self, robot: int | str) -> str:
         return f"{self.ns}/robot/{robot}/cmd"
 
+    # world/bridge -> localizer: one laser scan per tick (one scanner per team)
+    def scan(self) -> str:
+        return f"{self.ns}/laser/scan"
+
     # world -> recorder only: ground truth
     def truth(self, robot: int | str) -> str:
         return f"{self.ns}/robot/{robot}/truth"
@@ -46,6 +50,9 @@ class Keys:
 
     def alive_recorder(self) -> str:
         return f"{self.ns}/alive/recorder"
+
+    def alive_localizer(self) -> str:
+        return f"{self.ns}/alive/localizer"
 
     def world_tick(self) -> str:
         return f"{self.ns}/world/tick"

@@ -63,6 +63,33 @@ class Pose:
 
 
 @dataclass(frozen=True)
+class Scan:
+    """One sweep of the laser range finder (world/bridge -> localizer), SICK LMS 2xx
+    geometry by default: 361 ranges from ``angle_min`` in steps of ``angle_step``
+    (radians, counter-clockwise, relative to the scanner's heading). A beam that
+    sees nothing reads ``range_max``. The scanner's pose in the world frame is part
+    of the message, so the localizer needs no map of its own (thesis 6.1.5)."""
+
+    t: float
+    k: int
+    ranges: list[float]  # m, one per beam
+    scanner_x: float
+    scanner_y: float
+    scanner_theta: float  # where the scanner faces (its beam at angle 0), rad
+    angle_min: float = -0.5 * math.pi
+    angle_step: float = math.pi / 360.0
+    range_max: float = 8.0
+
+    def check(self) -> None:
+        _require(self.t >= 0 and self.k >= 0, "negative t or k")
+        _require(1 <= len(self.ranges) <= 4096, "ranges: 1 to 4096 beams")
+        _require(self.angle_step > 0 and self.range_max > 0, "bad angle_step or range_max")
+        _require(
+            all(0.0 <= r <= self.range_max for r in self.ranges), "range outside [0, range_max]"
+        )
+
+
+@dataclass(frozen=True)
 class Truth:
     """Ground truth pose of a simulated robot (world -> recorder only)."""
 
@@ -186,4 +213,4 @@ class Fault:
         _require(self.kind in FAULT_KINDS, f"unknown fault kind {self.kind!r}")
 
 
-ALL_TYPES = (Sense, Pose, Truth, Cmd, AgentState, Tick, WorldInfo, Fault)
+ALL_TYPES = (Sense, Pose, Scan, Truth, Cmd, AgentState, Tick, WorldInfo, Fault)

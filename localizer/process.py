@@ -1,0 +1,204 @@
+"""``btrack localizer``: laser scans plus each robot's odometry in, one pose per robot
+per scan out (thesis ch. 5, 6.1.5), as its own process.
+
+It hears the scanner (``laser/scan``) and every robot's sensing (``robot/*/sense``,
+for the odometry of the last period). Tick k is processed once scan k and the
+sensing of tick k of every robot are in (or, if a robot's sensing is missing, when a
+later scan arrives or after ``--sense-timeout`` wall seconds, with no motion for that
+robot); then it publishes ``robot/I/pose`` of tick k for every robot, source ``pf``.
+In lockstep simulation the agents wait for that pose, so the world's clock waits
+for the localizer too. Malformed messages are counted and dropped. Zenoh callbacks
+only enqueue; the filter runs on the main thread.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import queue
+import signal
+import sys
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import zenoh
+
+from localizer.core import FilterConfig, Localizer, ScanGeometry
+from wire import DecodeError, Keys, Pose, Scan, Sense, decode, encode
+from wire.session import add_session_args, declare_publisher, open_session, options_from_args
+
+KEEP_TICKS = 50  # pending ticks kept before the oldest is given up
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="btrack localizer",
+        description="Laser localisation: one particle filter per robot from the scanner's "
+        "scans and each robot's odometry; publishes every robot's pose per scan.",
+    )
+    p.add_argument("--robots", type=int, required=True, help="team size (robot ids 0..N-1)")
+    d = FilterConfig()
+    p.add_argument("--particles", type=int, default=d.particles,
+                   help=f"particles per robot ({d.particles})")
+    p.add_argument("--meas-std", type=float, default=d.meas_std_m,
+                   help=f"std of a measured centre, m ({d.meas_std_m})")
+    p.add_argument("--radius", type=float, default=d.radius_m,
+                   help=f"robot radius, m ({d.radius_m})")
+    p.add_argument("--gate", type=float, default=d.gate_m,
+                   help=f"largest distance from a prediction to its blob, m ({d.gate_m})")
+    p.add_argument("--seed", type=int, default=1, help="seed of the filters' noise (1)")
+    p.add_argument("--sense-timeout", type=float, default=0.5,
+                   help="wall seconds to wait for a robot's sensing of a scanned tick (0.5)")
+    add_session_args(p)
+    return p
+
+
+class LocalizerNode:
+    """The shell around a ``Localizer``: subscriptions, the per-tick buffer, publishing."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys, robots: int, config: FilterConfig,
+                 seed: int, sense_timeout: float):
+        self.keys = keys
+        self.n = robots
+        self.core = Localizer(robots, config, seed=seed)
+        self.sense_timeout = sense_timeout
+        self.events: queue.SimpleQueue[tuple[str, Any]] = queue.SimpleQueue()
+        self.scans: dict[int, Scan] = {}
+        self.senses: dict[int, dict[int, Sense]] = {}
+        self.first_seen: dict[int, float] = {}
+        self.last_k = -1
+        self.dropped = 0
+        self.scans_done = 0
+        self.late = 0  # ticks processed without every robot's odometry
+        self.update_s = 0.0
+        self.stopping = False
+        self.pub_pose = [declare_publisher(session, keys.pose(i)) for i in range(robots)]
+        self.subs = [
+            session.declare_subscriber(keys.scan(), self._on("scan")),
+            session.declare_subscriber(keys.sense("*"), self._on("sense")),
+        ]
+        self.token = session.liveliness().declare_token(keys.alive_localizer())
+
+    def _on(self, kind: str) -> Callable[[zenoh.Sample], None]:
+        def callback(sample: zenoh.Sample) -> None:
+            self.events.put((kind, (str(sample.key_expr), sample.payload.to_bytes())))
+        return callback
+
+    def stop(self) -> None:
+        self.stopping = True
+        self.events.put(("stop", None))
+
+    def _drop(self, key: str, why: str) -> None:
+        self.dropped += 1
+        if self.dropped <= 20 or self.dropped % 1000 == 0:
+            print(f"localizer: dropped message #{self.dropped} on {key}: {why}",
+                  file=sys.stderr, flush=True)
+
+    def _handle(self, kind: str, data: tuple[str, bytes]) -> None:
+        key, payload = data
+        try:
+            if kind == "scan":
+                scan = decode(Scan, payload)
+                if scan.k > self.last_k:
+                    self.scans[scan.k] = scan
+                    self.first_seen.setdefault(scan.k, time.monotonic())
+            else:
+                sense = decode(Sense, payload)
+                if sense.robot != Keys.robot_of(key):
+                    raise DecodeError(f"sense of robot {sense.robot} on {key}")
+                if sense.robot >= self.n:
+                    raise DecodeError(f"robot {sense.robot} outside a team of {self.n}")
+                if sense.k > self.last_k:
+                    self.senses.setdefault(sense.k, {})[sense.robot] = sense
+        except DecodeError as exc:
+            self._drop(key, str(exc))
+
+    def _ready(self, now: float) -> int | None:
+        """The oldest scanned tick that can be processed now, or None."""
+        if not self.scans:
+            return None
+        k = min(self.scans)
+        if len(self.senses.get(k, {})) == self.n:
+            return k
+        if len(self.scans) > 1 or now - self.first_seen[k] >= self.sense_timeout:
+            return k  # a robot's sensing went missing: go on without its motion
+        return None
+
+    def process(self, k: int) -> None:
+        scan = self.scans.pop(k)
+        self.first_seen.pop(k, None)
+        senses = self.senses.pop(k, {})
+        if len(senses) < self.n:
+            self.late += 1
+        dist = np.zeros(self.n)
+        dtheta = np.zeros(self.n)
+        for i, s in senses.items():
+            dist[i], dtheta[i] = s.odom_dist_m, s.odom_dtheta
+        geometry = ScanGeometry(scan.scanner_x, scan.scanner_y, scan.scanner_theta,
+                                scan.angle_min, scan.angle_step, scan.range_max,
+                                len(scan.ranges))
+        began = time.perf_counter()
+        estimates = self.core.step(np.asarray(scan.ranges), geometry, dist, dtheta)
+        self.update_s += time.perf_counter() - began
+        for i, e in enumerate(estimates):
+            pose = Pose(scan.t, k, i, e.x, e.y, e.theta, [e.var_x, e.var_y, e.var_theta], "pf")
+            self.pub_pose[i].put(encode(pose))
+        self.last_k = k
+        self.scans_done += 1
+        for old in [kk for kk in self.senses if kk <= k]:
+            del self.senses[old]
+        while len(self.scans) > KEEP_TICKS:
+            self.scans.pop(min(self.scans))
+
+    def run(self) -> None:
+        while not self.stopping:
+            try:
+                kind, data = self.events.get(timeout=0.05)
+                if kind == "stop":
+                    break
+                self._handle(kind, data)
+                while True:  # drain what is already queued before deciding
+                    kind, data = self.events.get_nowait()
+                    if kind == "stop":
+                        return
+                    self._handle(kind, data)
+            except queue.Empty:
+                pass
+            while (k := self._ready(time.monotonic())) is not None:
+                self.process(k)
+
+    def close(self) -> None:
+        self.token.undeclare()
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    if args.robots < 1:
+        print("btrack localizer: --robots must be at least 1", file=sys.stderr)
+        return 2
+    try:
+        config = FilterConfig(particles=args.particles, meas_std_m=args.meas_std,
+                              radius_m=args.radius, gate_m=args.gate)
+    except ValueError as exc:
+        print(f"btrack localizer: {exc}", file=sys.stderr)
+        return 2
+    opts = options_from_args(args)
+    with open_session(opts) as session:
+        node = LocalizerNode(session, Keys(opts.ns), args.robots, config, args.seed,
+                             args.sense_timeout)
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, lambda *_: node.stop())
+        try:
+            node.run()
+        finally:
+            node.close()
+            mean_ms = 1000.0 * node.update_s / node.scans_done if node.scans_done else None
+            print(json.dumps({
+                "localizer": True, "scans": node.scans_done, "dropped": node.dropped,
+                "late": node.late, "resampled": node.core.resampled,
+                "reseeded": node.core.reseeded,
+                "update_ms_mean": None if mean_ms is None else round(mean_ms, 3),
+            }), flush=True)
+    return 0

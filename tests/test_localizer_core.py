@@ -1,0 +1,171 @@
+"""The localizer's pure core on synthetic scans from the simulator's laser model:
+blob to centre, assignment of robots passing each other, occlusion, start without a
+pose, kidnapping, and the resampler against filterpy's."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from filterpy.monte_carlo import systematic_resample as filterpy_systematic
+
+from localizer.core import (
+    FilterConfig,
+    Localizer,
+    ScanGeometry,
+    assign,
+    blob_centre,
+    measure_centres,
+    split_blobs,
+    systematic_resample,
+)
+from simworld.laser import Laser, Scanner, box_walls
+
+SCANNER = Scanner(3.0, -2.0)
+GEOMETRY = ScanGeometry(SCANNER.x, SCANNER.y, SCANNER.theta, SCANNER.angle_min,
+                        SCANNER.angle_step, SCANNER.range_max, SCANNER.beams)
+
+
+def scan_of(laser: Laser, centres: list[tuple[float, float]]) -> np.ndarray:
+    return np.asarray(laser.scan(np.asarray(centres, dtype=float)))
+
+
+@pytest.mark.parametrize("centre", [(3.0, -1.0), (0.2, -0.3), (5.5, 1.6), (1.0, 1.5)])
+def test_lone_robot_centre_within_a_centimetre(centre: tuple[float, float]) -> None:
+    errors = []
+    for seed in range(40):
+        found = measure_centres(scan_of(Laser(SCANNER, seed=seed), [centre]), GEOMETRY,
+                                FilterConfig())
+        assert found.shape == (1, 2)
+        errors.append(math.dist(found[0], centre))
+    assert np.mean(errors) < 0.01 and max(errors) < 0.02  # 1 cm range noise, 4 m away
+
+
+def test_all_blobs_at_once_equal_one_blob_at_a_time() -> None:
+    centres = [(0.5, -1.0), (1.5, 0.5), (2.9, 0.0), (3.1, 1.0), (4.5, 1.5), (5.5, -0.5)]
+    ranges = scan_of(Laser(SCANNER, seed=9), centres)
+    config = FilterConfig()
+    one_by_one = [c for b in split_blobs(ranges, GEOMETRY, config.jump_m)
+                  if (c := blob_centre(ranges, GEOMETRY, b, config)) is not None]
+    assert np.allclose(measure_centres(ranges, GEOMETRY, config), one_by_one, atol=1e-9)
+
+
+def test_thesis_estimate_alone_is_close_too() -> None:
+    laser = Laser(SCANNER, noise_m=0.0)
+    found = measure_centres(scan_of(laser, [(1.0, 1.0)]), GEOMETRY, FilterConfig(refine=False))
+    assert math.dist(found[0], (1.0, 1.0)) < 0.03  # bearing quantised to 0.5 degrees
+
+
+def test_walls_are_not_robots_and_robots_hide_what_is_behind() -> None:
+    walls = box_walls(-1.0, -2.5, 7.0, 4.0)
+    laser = Laser(SCANNER, walls=walls, seed=3)
+    ranges = scan_of(laser, [(3.0, 0.0), (3.0, 1.0)])  # the second hides behind the first
+    assert (ranges < SCANNER.range_max).all()  # the walls close the view
+    found = measure_centres(ranges, GEOMETRY, FilterConfig())
+    assert found.shape == (1, 2) and math.dist(found[0], (3.0, 0.0)) < 0.01
+    assert len(split_blobs(ranges, GEOMETRY, 0.1)) >= 2
+
+
+def test_assignment_gates_and_ignores_strangers() -> None:
+    predicted = np.array([[1.0, 0.0], [2.0, 0.0]])
+    measured = np.array([[2.05, 0.0], [5.0, 5.0], [0.98, 0.01]])
+    assert assign(predicted, measured, np.array([True, True]), 0.25).tolist() == [2, 0]
+    assert assign(predicted, measured[1:2], np.array([True, True]), 0.25).tolist() == [-1, -1]
+
+
+def track(localizer: Localizer, laser: Laser, poses: np.ndarray,
+          odometry: np.ndarray) -> list[np.ndarray]:
+    """Run the filter over a trajectory (poses (T, R, 3), odometry (T, R, 2));
+    return the estimates (T, R, 3)."""
+    out = []
+    for k in range(poses.shape[0]):
+        ranges = scan_of(laser, poses[k, :, :2].tolist())
+        est = localizer.step(ranges, GEOMETRY, odometry[k, :, 0], odometry[k, :, 1])
+        out.append(np.array([[e.x, e.y, e.theta] for e in est]))
+    return out
+
+
+def straight_lines(starts: list[tuple[float, float, float]], speed: float, steps: int,
+                   dt: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
+    poses = np.zeros((steps, len(starts), 3))
+    odom = np.zeros((steps, len(starts), 2))
+    for r, (x, y, th) in enumerate(starts):
+        for k in range(steps):
+            d = speed * dt * k
+            poses[k, r] = (x + d * math.cos(th), y + d * math.sin(th), th)
+            odom[k, r] = (speed * dt if k else 0.0, 0.0)
+    return poses, odom
+
+
+def test_starts_without_a_pose_and_learns_the_heading_from_motion() -> None:
+    poses, odom = straight_lines([(1.0, -1.0, 0.5 * math.pi), (4.0, -1.0, 0.5 * math.pi)],
+                                 0.3, 60)
+    loc = Localizer(2, seed=2)
+    est = track(loc, Laser(SCANNER, seed=2), poses, odom)
+    for r in range(2):
+        assert math.dist(est[0][r, :2], poses[0, r, :2]) < 0.05  # robots in edge order
+        assert math.dist(est[-1][r, :2], poses[-1, r, :2]) < 0.03
+        assert abs(est[-1][r, 2] - poses[-1, r, 2]) < 0.15
+
+
+def test_two_robots_passing_each_other_keep_their_identities() -> None:
+    # robot 0 drives +x, robot 1 drives -x, 0.5 m apart across: they pass at x = 3
+    poses, odom = straight_lines([(1.5, 0.0, 0.0), (4.5, 0.5, math.pi)], 0.5, 60)
+    loc = Localizer(2, seed=4)
+    est = track(loc, Laser(SCANNER, seed=4), poses, odom)
+    errors = np.array([np.hypot(*(e[:, :2] - p[:, :2]).T) for e, p in zip(est, poses,
+                                                                          strict=True)])
+    assert errors[5:].max() < 0.05  # never swapped (a swap is a 3 m error at the end)
+
+
+def test_occluded_robot_keeps_its_estimate_by_prediction() -> None:
+    # robot 1 drives -x along y = 1.2 behind robot 0, parked at (3, 0): hidden for a while
+    steps = 40
+    poses = np.zeros((steps, 2, 3))
+    odom = np.zeros((steps, 2, 2))
+    poses[:, 0] = (3.0, 0.0, 0.5 * math.pi)
+    for k in range(steps):
+        poses[k, 1] = (4.0 - 0.05 * k, 1.2, math.pi)
+        odom[k, 1] = (0.05 if k else 0.0, 0.0)
+    laser = Laser(SCANNER, seed=5)
+    loc = Localizer(2, seed=5)
+    hidden = []
+    errors = []
+    for k in range(steps):
+        ranges = scan_of(laser, poses[k, :, :2].tolist())
+        est = loc.step(ranges, GEOMETRY, odom[k, :, 0], odom[k, :, 1])
+        if not est[1].measured:
+            hidden.append(k)
+        errors.append(math.dist((est[1].x, est[1].y), poses[k, 1, :2]))
+    assert len(hidden) >= 5  # it really was hidden for several scans
+    assert max(errors[k] for k in hidden) < 0.05
+    assert max(errors[5:]) < 0.05
+
+
+def test_kidnapped_robot_is_found_again() -> None:
+    poses, odom = straight_lines([(1.0, -1.0, 0.5 * math.pi), (4.5, -1.0, 0.5 * math.pi)],
+                                 0.2, 80)
+    poses[40:, 1, 0] -= 1.0  # carried 1 m along the edge at scan 40, odometry unaware
+    loc = Localizer(2, seed=6)
+    est = track(loc, Laser(SCANNER, seed=6), poses, odom)
+    err = [math.dist(e[1, :2], p[1, :2]) for e, p in zip(est, poses, strict=True)]
+    assert err[39] < 0.05 and err[40] > 0.5
+    back = next(k for k in range(40, 80) if all(e < 0.05 for e in err[k:]))
+    assert back - 40 <= 20
+    assert loc.reseeded >= 3  # two at the start, one after the kidnapping
+
+
+def test_vectorised_resampler_matches_filterpy() -> None:
+    rng = np.random.default_rng(7)
+    weights = rng.random((4, 500)) ** 8
+    weights /= weights.sum(axis=1, keepdims=True)
+    offsets = np.empty(4)
+    expected = []
+    for r in range(4):
+        np.random.seed(100 + r)
+        offsets[r] = np.random.random()
+        np.random.seed(100 + r)
+        expected.append(filterpy_systematic(weights[r]))
+    got = systematic_resample(weights, offsets)
+    assert np.array_equal(got, np.asarray(expected))
