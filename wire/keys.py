@@ -53,6 +53,10 @@ class Keys:
     def world_info(self) -> str:
         return f"{self.ns}/world/info"
 
+    # laser (simworld or hwbridge) -> localizer
+    def scan(self) -> str:
+        return f"{self.ns}/laser/scan"
+
     def everything(self) -> str:
         return f"{self.ns}/**"
 

@@ -165,4 +165,28 @@ class WorldInfo:
         _require(self.robots >= 1 and self.dt > 0, "bad robots or dt")
 
 
-ALL_TYPES = (Sense, Pose, Truth, Cmd, AgentState, Tick, WorldInfo)
+@dataclass(frozen=True)
+class Scan:
+    """One laser scan (SICK LMS 2xx geometry) and the scanner's pose (laser -> localizer).
+
+    Beam j points at ``theta + angle_min + j * angle_step`` from (x, y); a range equal to
+    ``range_max`` means no return."""
+
+    t: float
+    k: int
+    ranges: list[float]  # m
+    angle_min: float  # rad, relative to the scanner's heading
+    angle_step: float  # rad
+    range_max: float  # m
+    x: float  # scanner pose in the world frame
+    y: float
+    theta: float
+
+    def check(self) -> None:
+        _require(self.t >= 0 and self.k >= 0, "negative t or k")
+        _require(len(self.ranges) >= 1, "a scan needs at least one range")
+        _require(all(r >= 0 for r in self.ranges), "negative range")
+        _require(self.angle_step > 0, "angle_step must be positive")
+
+
+ALL_TYPES = (Sense, Pose, Truth, Cmd, AgentState, Tick, WorldInfo, Scan)
