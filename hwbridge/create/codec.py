@@ -65,7 +65,7 @@ def _i16(value: int) -> bytes:
     return (value & 0xFFFF).to_bytes(2, "big")
 
 
-def checksum(body: bytes) -> int:
+def checksum(body: bytes | bytearray) -> int:
     """The byte that makes ``sum(body) + it`` 0 modulo 256."""
     return (-sum(body)) & 0xFF
 
