@@ -15,6 +15,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "world": ("simworld.process", "the simulator: maps, kinematics, sensors, the clock"),
     "record": ("recorder.process", "record everything on the bus into an MCAP file"),
     "report": ("report.cli", "measures, summary.json and figures from a recorded run"),
+    "bridge": ("hwbridge.cli", "real devices on the bus: iRobot Create, SICK LMS 2xx"),
 }
 
 
