@@ -193,7 +193,8 @@ class AgentNode:
                 pass
             k = self._ready_tick()
             if k is None:
-                deadline = None
+                # Keep a running neighbour deadline: with hardware, tick k+1's Sense often
+                # comes before tick k's Pose, and resetting here would wait forever.
                 continue
             if k > 0 and not self._neighbours_ready(k):
                 if deadline is None:

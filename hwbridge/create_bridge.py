@@ -1,12 +1,12 @@
 """``btrack bridge create``: one iRobot Create on the bus, as simworld publishes it.
 
-Publishes ``Sense`` on ``keys.sense(I)`` at the control rate (10 Hz, k counts ticks,
-t from the run clock): ice from the upward IR sensor on the cargo bay analog input,
-algae from a cargo bay digital input, odometry since the previous tick. Takes ``Cmd``
-from ``keys.cmd(I)`` and drives the wheels at once (Drive Direct, wheel limits kept);
-the watchdog stops the wheels when commands stop. A lost port is logged, counted,
-reopened on a backoff, and the robot restarted with its wheels stopped. On exit it
-prints its counters as one JSON line.
+Publishes ``Sense`` on ``keys.sense(I)`` at the control rate (10 Hz; k and t from the
+run clock, so every robot of a run has the same k at the same time): ice from the
+upward IR sensor on the cargo bay analog input, algae from a cargo bay digital input,
+odometry since the previous tick. Takes ``Cmd`` from ``keys.cmd(I)`` and drives the
+wheels at once (Drive Direct, wheel limits kept); the watchdog stops the wheels when
+commands stop. A lost port is logged, counted, reopened on a backoff, and the robot
+restarted with its wheels stopped. On exit it prints its counters as one JSON line.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ import time
 from hwbridge.common import add_epoch_arg, bounded_session, on_stop, parse_floats
 from hwbridge.create import model as cm
 from hwbridge.create_driver import CreateDriver
-from hwbridge.runclock import RunClock
+from hwbridge.runclock import RunClock, tick_of
 from hwbridge.transport import PortError
 from wire import Cmd, DecodeError, Keys, Sense, decode, encode
 from wire.session import add_session_args, declare_publisher, options_from_args
@@ -103,8 +103,9 @@ def main(argv: list[str] | None = None) -> int:
         sub = session.declare_subscriber(keys.cmd(args.id),
                                          lambda s: events.put(s.payload.to_bytes()))
         on_stop(stop)
-        next_tick = time.monotonic()
-        k = 0
+        k = tick_of(clock.t(), args.dt) + 1
+        next_tick = clock.mono_at(k * args.dt)
+        first_k = k
         try:
             while not stopping:
                 now = time.monotonic()
@@ -144,11 +145,10 @@ def main(argv: list[str] | None = None) -> int:
                             sensing.odom_dist_m, sensing.odom_dtheta, edge_lo, edge_hi,
                             args.dt)))
                         counts["sense"] += 1
-                    k += 1
-                    counts["ticks"] = k
-                    next_tick += args.dt
-                    if now - next_tick > args.dt:  # a stall: skip ticks, do not burst
-                        next_tick = now + args.dt
+                    # the next tick on the epoch's grid (after a stall, ticks are skipped)
+                    k = max(k + 1, tick_of(clock.t(now), args.dt) + 1)
+                    counts["ticks"] = k - first_k
+                    next_tick = clock.mono_at(k * args.dt)
         finally:
             driver.close()
             sub.undeclare()

@@ -1,9 +1,11 @@
-"""The time stamps of a hardware run: wall-clock seconds since the run's epoch.
+"""The time stamps of a hardware run: wall-clock seconds since the run's epoch, and ticks.
 
 Robot computers share only the wall clock (NTP), so every process of a run stamps
 ``t = wall - epoch`` with the same ``--epoch``; the value advances on the monotonic
 clock (taken once against the wall clock at start), so a clock step mid-run cannot make
-time run backwards. Only process shells use this; cores get ``t`` and ``dt``.
+time run backwards. Ticks are counted from the epoch (k = t // dt) and fall on its grid,
+so robots of one run share k as they do in simulation, where an agent waits for its
+neighbours' states of tick k - 1. Only process shells use this; cores get ``t`` and ``dt``.
 """
 
 from __future__ import annotations
@@ -21,3 +23,12 @@ class RunClock:
         """Seconds since the epoch at monotonic time ``mono`` (now if None), never < 0."""
         m = time.monotonic() if mono is None else mono
         return max(0.0, m + self._offset)
+
+    def mono_at(self, t: float) -> float:
+        """The monotonic time at which the run clock reads ``t``."""
+        return t - self._offset
+
+
+def tick_of(t: float, dt: float) -> int:
+    """The control tick at run time ``t``: every process of a run counts the same k."""
+    return int(t // dt)
