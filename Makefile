@@ -20,7 +20,7 @@ test: $(STAMP)
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
-	$(BIN)/mypy agent wire
+	$(BIN)/mypy agent wire hwbridge
 
 bench: $(STAMP)
 	$(BIN)/python bench/speed.py

@@ -47,6 +47,8 @@ class CreateDriver:
         self.mode_recoveries = 0
         self.stopped_by_watchdog = False
         self.wheels = (0, 0)
+        self.stale_s = 0.5  # no frame for this long: the robot is not sensing
+        self._last_frame: float | None = None
         self._was_open = False
 
     # connection ---------------------------------------------------------------
@@ -56,6 +58,7 @@ class CreateDriver:
         self._start_robot()
 
     def _start_robot(self) -> None:
+        self._last_frame = None
         self.parser.reset()
         self.odometry.reset()
         mode = oi.full() if self.oi_mode == "full" else oi.safe()
@@ -89,6 +92,7 @@ class CreateDriver:
             self.reading = cm.reading_from(values)
             self.odometry.update(values)
             self.frames_since_tick += 1
+            self._last_frame = now
 
     # commands -----------------------------------------------------------------
     def _drive(self, right: int, left: int) -> None:
@@ -102,7 +106,9 @@ class CreateDriver:
 
     def tick(self, now: float) -> TickSensing | None:
         """Once per control period: the watchdog, mode recovery, and the sensing since the
-        previous tick (None if no frame arrived: the port is down or the robot silent)."""
+        previous tick: the latest reading and the odometry since then, even if no frame
+        completed during this tick (a late frame's motion goes into the next tick); None
+        when no frame came for ``stale_s`` (the port is down or the robot silent)."""
         if self.watchdog.expired(now):
             if not self.stopped_by_watchdog and self.wheels != (0, 0):
                 log.warning("no command for %.1f s: stopping the wheels",
@@ -115,8 +121,8 @@ class CreateDriver:
             self.mode_recoveries += 1
             self.transport.write(oi.full() if self.oi_mode == "full" else oi.safe())
         frames, self.frames_since_tick = self.frames_since_tick, 0
-        if r is None or frames == 0:
-            self.odometry.take()
+        if (r is None or self._last_frame is None or now - self._last_frame > self.stale_s
+                or not self.connected):
             return None
         dist, dtheta = self.odometry.take()
         ice = self.ice_sensor.ice(r.cargo_analog)

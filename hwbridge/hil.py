@@ -28,6 +28,9 @@ from wire import Keys
 from wire.session import SessionOptions, open_session
 
 DEFAULT_FAULTS = 0.005  # one device message in 200 damaged on purpose
+# On the wall clock an agent must not wait for a late neighbour longer than the bridge's
+# watchdog (0.5 s) lets its robot run without a command.
+NEIGHBOUR_TIMEOUT_S = 0.3
 
 
 def _agent_args(args: argparse.Namespace) -> list[str]:
@@ -118,7 +121,8 @@ def run(args: argparse.Namespace) -> int:
             lms = group.start("bridge-lms", ["bridge", "lms", "--port", str(devices / "lms"),
                                              "--baud", "38400", *epoch, *member])
             agents = [group.start(f"agent{i}", [
-                "agent", "--id", str(i), "--robots", str(n), *_agent_args(args), *member])
+                "agent", "--id", str(i), "--robots", str(n), "--neighbour-timeout",
+                str(NEIGHBOUR_TIMEOUT_S), *_agent_args(args), *member])
                 for i in range(n)]
             last_print = time.monotonic()
             while world.alive() and not _last_json(world):
@@ -161,8 +165,8 @@ def run(args: argparse.Namespace) -> int:
         "lms_bytes_per_s": bridge_stats["bridge-lms"].get("bytes_per_s"),
         "create_bytes_per_s": [bridge_stats[f"bridge{i}"].get("bytes_per_s") for i in range(n)],
     }
-    (out / "hil.json").write_text(json.dumps({"world": world_stats, "bridges": bridge_stats},
-                                             indent=1))
+    (out / "hil.json").write_text(json.dumps({**hil, "world": world_stats,
+                                              "bridges": bridge_stats}, indent=1))
     print(f"\nbtrack sim --hil: run finished in {wall:.1f} s wall; recording {out / 'run.mcap'}")
     if args.no_report:
         print(json.dumps(hil, indent=2))
