@@ -164,8 +164,10 @@ class AgentNode:
         return Neighbour(s.robot, s.lo, s.hi, s.phase_des, s.workload)
 
     def _neighbours_ready(self, k: int) -> bool:
+        # k - 1 or later: on the wall clock a neighbour may have skipped tick k - 1
+        # (in lockstep nobody skips, so this is the same as waiting for k - 1 itself).
         for rid in self.neighbours():
-            if rid is not None and (k - 1) not in self.states.get(rid, {}):
+            if rid is not None and max(self.states.get(rid, {}), default=-1) < k - 1:
                 return False
         return True
 

@@ -213,8 +213,19 @@ class HilWorld:
             self.pub_truth[s.robot].put(encode(Truth(s.t, s.k, s.robot, x, y, th)))
             self.pub_pose[s.robot].put(encode(Pose(s.t, s.k, s.robot, x, y, th)))
 
+    def respond(self) -> None:
+        """Its own thread: answer each Sense with Truth and Pose as soon as it arrives,
+        rather than between physics steps."""
+        while not self.stopping:
+            try:
+                self.handle(self.events.get(timeout=0.1))
+            except queue.Empty:
+                pass
+
     def run(self, clock: RunClock) -> dict[str, object]:
         a = self.args
+        responder = threading.Thread(target=self.respond, daemon=True)
+        responder.start()
         step = 1.0 / a.physics_hz
         began = last = time.monotonic()
         deadline_start = began + a.startup_timeout
@@ -245,16 +256,9 @@ class HilWorld:
                 if now >= next_info:
                     self.publish_info()
                     next_info += INFO_EVERY_S
-            wait_until = last + step
-            while True:
-                remaining = wait_until - time.monotonic()
-                if remaining <= 0:
-                    break
-                try:
-                    self.handle(self.events.get(timeout=remaining))
-                except queue.Empty:
-                    break
+            time.sleep(max(0.0, last + step - time.monotonic()))
         wall = time.monotonic() - began
+        self.running = False
         return {
             "hil_world": True, "ticks": k, "wall_s": round(wall, 3), "dropped": self.dropped,
             "create_frames": [e.frames for e in self.creates],
