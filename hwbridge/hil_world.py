@@ -10,12 +10,13 @@ the Create's distance and angle counters; the LMS's ranges are the robots seen a
 discs from the laser's pose. ``--faults P`` damages that fraction of the devices'
 messages (garbage, a flipped bit, a cut) so the bridges must resynchronise.
 
-What only a simulator can know it publishes itself, as ``btrack world`` does: ``Truth``,
-and ``Pose`` (truth) for each ``Sense`` a bridge publishes, with that Sense's t and k, so
-agents run as in ``btrack sim --localization truth``; ``Tick`` at 10 Hz and
-``WorldInfo`` for the recorder and the report. It waits for the whole team (and the
-recorder) like the world does, runs ``--duration`` wall seconds, ends with a done Tick,
-prints its counters as JSON and keeps the devices plugged in until SIGTERM.
+What only a simulator can know it publishes itself, as ``btrack world`` does: ``Truth``
+and a truth ``Pose`` of every robot at each tick of the run's epoch grid (k = t // dt,
+the ticks the bridges publish their Sense on), so agents run as in ``btrack sim
+--localization truth``; ``Tick`` and ``WorldInfo`` for the recorder and the report.
+It waits for the whole team (and the recorder) like the world does, runs ``--duration``
+wall seconds, ends with a done Tick, prints its counters as JSON and keeps the devices
+plugged in until SIGTERM.
 """
 
 from __future__ import annotations
@@ -37,10 +38,10 @@ from hwbridge.common import add_epoch_arg, bounded_session, on_stop
 from hwbridge.create.model import MODELS
 from hwbridge.emulators.pty import CreateEmulator, Faults, LmsEmulator
 from hwbridge.lms.model import ScanGeometry
-from hwbridge.runclock import RunClock
+from hwbridge.runclock import RunClock, tick_of
 from simworld.maps import MapError, load_map
 from simworld.world import ROBOT_RADIUS_M, World, parse_start
-from wire import DecodeError, Keys, Pose, Sense, Tick, Truth, WorldInfo, decode, encode
+from wire import Keys, Pose, Tick, Truth, WorldInfo, encode
 from wire.session import add_session_args, declare_publisher, options_from_args
 
 log = logging.getLogger("btrack.hil")
@@ -137,8 +138,6 @@ class HilWorld:
         self.pub_tick = declare_publisher(session, keys.world_tick())
         self.pub_info = declare_publisher(session, keys.world_info())
         self._subs = [
-            session.declare_subscriber(
-                keys.sense("*"), lambda s: put(("sense", str(s.key_expr), s.payload.to_bytes()))),
             session.liveliness().declare_subscriber(
                 keys.alive("*"),
                 lambda s: put(("alive", str(s.key_expr), s.kind == zenoh.SampleKind.PUT)),
@@ -200,22 +199,19 @@ class HilWorld:
                 (self.live.add if value else self.live.discard)(rid)
         elif kind == "recorder":
             self.recorder_alive = bool(value)
-        elif kind == "sense" and self.running:
-            try:
-                s = decode(Sense, value)  # type: ignore[arg-type]
-            except DecodeError:
-                self.dropped += 1
-                return
-            if not 0 <= s.robot < self.n:
-                return
-            with self.lock:
-                x, y, th = self.world.truth(s.robot)
-            self.pub_truth[s.robot].put(encode(Truth(s.t, s.k, s.robot, x, y, th)))
-            self.pub_pose[s.robot].put(encode(Pose(s.t, s.k, s.robot, x, y, th)))
+
+    def publish_poses(self, k: int) -> None:
+        """Truth and the truth Pose of tick k, at the tick's time on the epoch's grid:
+        the same instant the bridges sample their robots' Sense of tick k."""
+        t = k * self.args.dt
+        with self.lock:
+            poses = [self.world.truth(i) for i in range(self.n)]
+        for i, (x, y, th) in enumerate(poses):
+            self.pub_truth[i].put(encode(Truth(t, k, i, x, y, th)))
+            self.pub_pose[i].put(encode(Pose(t, k, i, x, y, th)))
 
     def respond(self) -> None:
-        """Its own thread: answer each Sense with Truth and Pose as soon as it arrives,
-        rather than between physics steps."""
+        """Its own thread: membership events, off the physics loop."""
         while not self.stopping:
             try:
                 self.handle(self.events.get(timeout=0.1))
@@ -230,7 +226,7 @@ class HilWorld:
         began = last = time.monotonic()
         deadline_start = began + a.startup_timeout
         next_tick = next_info = end = 0.0
-        k = 0
+        k = ticks = 0
         while not self.stopping:
             now = time.monotonic()
             self.physics(now - last)
@@ -240,17 +236,23 @@ class HilWorld:
                 if ready:
                     self.running = True
                     self.publish_info()
-                    next_tick, next_info, end = now, now + INFO_EVERY_S, now + a.duration
+                    next_info, end = now + INFO_EVERY_S, now + a.duration
+                    k = tick_of(clock.t(), a.dt) + 1
+                    next_tick = clock.mono_at(k * a.dt)
                 elif now > deadline_start:
                     print(f"btrack bridge hil-world: team not complete after "
                           f"{a.startup_timeout:g} s (live {sorted(self.live)})", file=sys.stderr)
                     return {"error": "startup timeout"}
             else:
-                if now >= next_tick:
+                if time.monotonic() >= next_tick:
                     done = now >= end
-                    self.pub_tick.put(encode(Tick(clock.t(now), k, sorted(self.live), 0.0, done)))
-                    k += 1
-                    next_tick += a.dt
+                    self.publish_poses(k)
+                    t = k * a.dt
+                    self.pub_tick.put(encode(Tick(t, k, sorted(self.live), 0.0, done)))
+                    ticks += 1
+                    # the next tick on the epoch's grid, as the bridges count them
+                    k = max(k + 1, tick_of(clock.t(), a.dt) + 1)
+                    next_tick = clock.mono_at(k * a.dt)
                     if done:
                         break
                 if now >= next_info:
@@ -260,7 +262,7 @@ class HilWorld:
         wall = time.monotonic() - began
         self.running = False
         return {
-            "hil_world": True, "ticks": k, "wall_s": round(wall, 3), "dropped": self.dropped,
+            "hil_world": True, "ticks": ticks, "wall_s": round(wall, 3), "dropped": self.dropped,
             "create_frames": [e.frames for e in self.creates],
             "lms_scans": self.lms.scans,
             "faults_injected": sum(e.faults.injected for e in (*self.creates, self.lms)),
