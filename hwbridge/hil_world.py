@@ -229,6 +229,24 @@ class HilWorld:
         k = ticks = 0
         while not self.stopping:
             now = time.monotonic()
+            if self.running and now >= next_tick:
+                # Step exactly to the tick's grid time first, so that Truth and Pose of
+                # tick k are the robots' poses at t = k * dt even when this loop is late.
+                if next_tick > last:
+                    self.physics(next_tick - last)
+                    last = next_tick
+                done = now >= end
+                self.publish_poses(k)
+                self.pub_tick.put(encode(Tick(k * a.dt, k, sorted(self.live), 0.0, done)))
+                ticks += 1
+                # the next tick on the epoch's grid, as the bridges count them
+                k = max(k + 1, tick_of(clock.t(), a.dt) + 1)
+                next_tick = clock.mono_at(k * a.dt)
+                if done:
+                    break
+                if now >= next_info:
+                    self.publish_info()
+                    next_info += INFO_EVERY_S
             self.physics(now - last)
             last = now
             if not self.running:
@@ -243,21 +261,6 @@ class HilWorld:
                     print(f"btrack bridge hil-world: team not complete after "
                           f"{a.startup_timeout:g} s (live {sorted(self.live)})", file=sys.stderr)
                     return {"error": "startup timeout"}
-            else:
-                if time.monotonic() >= next_tick:
-                    done = now >= end
-                    self.publish_poses(k)
-                    t = k * a.dt
-                    self.pub_tick.put(encode(Tick(t, k, sorted(self.live), 0.0, done)))
-                    ticks += 1
-                    # the next tick on the epoch's grid, as the bridges count them
-                    k = max(k + 1, tick_of(clock.t(), a.dt) + 1)
-                    next_tick = clock.mono_at(k * a.dt)
-                    if done:
-                        break
-                if now >= next_info:
-                    self.publish_info()
-                    next_info += INFO_EVERY_S
             time.sleep(max(0.0, last + step - time.monotonic()))
         wall = time.monotonic() - began
         self.running = False
