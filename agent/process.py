@@ -164,10 +164,12 @@ class AgentNode:
         return Neighbour(s.robot, s.lo, s.hi, s.phase_des, s.workload)
 
     def _neighbours_ready(self, k: int) -> bool:
-        # k - 1 or later: on the wall clock a neighbour may have skipped tick k - 1
-        # (in lockstep nobody skips, so this is the same as waiting for k - 1 itself).
+        # A state of k - 1 or later, or of our own previous tick if we skipped k - 1: on
+        # the wall clock ticks can be skipped (in lockstep none is, so this is the same
+        # as waiting for k - 1 itself).
+        need = min(k - 1, self.last_k)
         for rid in self.neighbours():
-            if rid is not None and max(self.states.get(rid, {}), default=-1) < k - 1:
+            if rid is not None and max(self.states.get(rid, {}), default=-1) < need:
                 return False
         return True
 

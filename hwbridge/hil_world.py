@@ -227,9 +227,10 @@ class HilWorld:
         deadline_start = began + a.startup_timeout
         next_tick = next_info = end = 0.0
         k = ticks = 0
+        done = False
         while not self.stopping:
             now = time.monotonic()
-            if self.running and now >= next_tick:
+            while self.running and now >= next_tick:  # late: catch up, never skip
                 # Step exactly to the tick's grid time first, so that Truth and Pose of
                 # tick k are the robots' poses at t = k * dt even when this loop is late.
                 if next_tick > last:
@@ -239,14 +240,17 @@ class HilWorld:
                 self.publish_poses(k)
                 self.pub_tick.put(encode(Tick(k * a.dt, k, sorted(self.live), 0.0, done)))
                 ticks += 1
-                # the next tick on the epoch's grid, as the bridges count them
-                k = max(k + 1, tick_of(clock.t(), a.dt) + 1)
+                # The next tick on the epoch's grid. A late tick is still published: its
+                # poses are exact (physics stepped to its grid time), only later.
+                k += 1
                 next_tick = clock.mono_at(k * a.dt)
                 if done:
                     break
                 if now >= next_info:
                     self.publish_info()
                     next_info += INFO_EVERY_S
+            if ticks and done:
+                break
             self.physics(now - last)
             last = now
             if not self.running:
