@@ -242,3 +242,17 @@ def test_host_side_parser_reads_host_telegrams() -> None:
     assert t.command == lms.VARIANT and t.data == bytes([100, 0, 25, 0])
     with pytest.raises(ValueError):
         ScanGeometry(180, 25)
+
+
+def test_scan_message_on_the_wire() -> None:
+    from wire import DecodeError, Keys, Scan, decode, encode
+
+    scan = Scan(1.5, 7, [1.0, 8.183], -math.pi / 2, math.radians(0.5), 8.183, 3.0, -2.0, 1.57)
+    assert decode(Scan, encode(scan)) == scan
+    assert Keys("btrack/lab").scan() == "btrack/lab/laser/scan"
+    for bad in (Scan(0.0, 0, [], 0.0, 0.1, 8.0, 0, 0, 0),
+                Scan(0.0, 0, [-1.0], 0.0, 0.1, 8.0, 0, 0, 0),
+                Scan(0.0, 0, [1.0], 0.0, 0.0, 8.0, 0, 0, 0)):
+        with pytest.raises(DecodeError):
+            decode(Scan, encode(bad))
+

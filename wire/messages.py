@@ -183,7 +183,6 @@ class Scan:
     theta: float
 
     def check(self) -> None:
-        _require(self.t >= 0 and self.k >= 0, "negative t or k")
         _require(len(self.ranges) >= 1, "a scan needs at least one range")
         _require(all(r >= 0 for r in self.ranges), "negative range")
         _require(self.angle_step > 0, "angle_step must be positive")
