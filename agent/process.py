@@ -69,6 +69,9 @@ class AgentNode:
         self.neighbour_subs: dict[int, Any] = {}
         self.sense: Sense | None = None
         self.pose: Pose | None = None
+        # by tick: with hardware a tick's Pose can come after the next tick's Sense
+        self.senses: dict[int, Sense] = {}
+        self.poses: dict[int, Pose] = {}
         self.last_k = -1
         self.dropped = 0
         self.ticks = 0
@@ -135,12 +138,14 @@ class AgentNode:
                 msg = decode(Sense, payload)
                 if msg.robot != self.robot:
                     raise DecodeError(f"sense for robot {msg.robot}")
-                self.sense = msg
+                self.senses[msg.k] = msg
+                self._prune(self.senses)
             elif kind == "pose":
                 pose = decode(Pose, payload)
                 if pose.robot != self.robot:
                     raise DecodeError(f"pose for robot {pose.robot}")
-                self.pose = pose
+                self.poses[pose.k] = pose
+                self._prune(self.poses)
             elif kind == "state":
                 state = decode(AgentState, payload)
                 if Keys.robot_of(key) != state.robot:
@@ -173,11 +178,18 @@ class AgentNode:
                 return False
         return True
 
+    def _prune(self, by_tick: dict[int, Any]) -> None:
+        for old in [k for k in by_tick if k <= self.last_k or k < max(by_tick) - HISTORY]:
+            del by_tick[old]
+
     def _ready_tick(self) -> int | None:
-        s, p = self.sense, self.pose
-        if s is None or p is None or s.k != p.k or s.k <= self.last_k:
+        """The newest tick after the last one done with both its Sense and its Pose."""
+        ready = [k for k in self.senses if k > self.last_k and k in self.poses]
+        if not ready:
             return None
-        return s.k
+        k = max(ready)
+        self.sense, self.pose = self.senses[k], self.poses[k]
+        return k
 
     def run(self) -> None:
         deadline: float | None = None

@@ -52,7 +52,7 @@ def main() -> int:
         print(f"| {name} | {args.duration:g} | {_fmt(s['phase_sse_rad'])} "
               f"| {_fmt(s['phase_max_rad'])} | {_fmt(s['workload_sse_m2'], 4)} "
               f"| {_fmt(s['workload_max_m2'], 4)} | {_fmt(s['converge_s'], 1)} "
-              f"| {_fmt(s.get('scan_rate_hz', '-'))} | {_fmt(s.get('lms_bytes_per_s', '-'))} "
+              f"| {_fmt(s.get('scan_rate_hz', '-'), 2)} | {_fmt(s.get('lms_bytes_per_s', '-'), 0)} "
               f"| {', '.join(_fmt(c, 0) for c in create) if create else '-'} "
               f"| {s.get('serial_errors_total', '-')} ({s.get('faults_injected', '-')}) |")
     ratio_p = hil["phase_sse_rad"] / plain["phase_sse_rad"]
