@@ -57,6 +57,37 @@ def _fail(group: ProcessGroup, child: Child, what: str) -> int:
     return 1
 
 
+def hil_stats(out: Path, n: int) -> dict[str, Any]:
+    """What the HIL run adds to summary.json, from its processes' last JSON lines (also
+    written, with every counter, to OUT/hil.json)."""
+
+    def last(name: str) -> dict[str, Any]:
+        try:
+            lines = (out / "logs" / f"{name}.out").read_text().strip().splitlines()
+            return json.loads(lines[-1]) if lines else {}
+        except (OSError, json.JSONDecodeError):
+            return {}
+
+    world_stats = last("hil-world")
+    bridge_stats = {name: last(name) for name in [f"bridge{i}" for i in range(n)]
+                    + ["bridge-lms"]}
+    serial_errors = {name: st.get("serial_errors") for name, st in bridge_stats.items()}
+    hil = {
+        "hil": True,
+        "serial_errors": serial_errors,
+        "serial_errors_total": sum(v or 0 for v in serial_errors.values()),
+        "faults_injected": world_stats.get("faults_injected"),
+        "port_losses": sum(st.get("port_losses", 0) for st in bridge_stats.values()),
+        "scan_rate_hz": bridge_stats["bridge-lms"].get("scan_rate_hz"),
+        "lms_bytes_per_s": bridge_stats["bridge-lms"].get("bytes_per_s"),
+        "create_bytes_per_s": [bridge_stats[f"bridge{i}"].get("bytes_per_s")
+                               for i in range(n)],
+    }
+    (out / "hil.json").write_text(json.dumps({**hil, "world": world_stats,
+                                              "bridges": bridge_stats}, indent=1))
+    return hil
+
+
 def _wait_paths(paths: list[Path], child: Child, timeout: float) -> bool:
     deadline = time.monotonic() + timeout
     while not all(p.exists() for p in paths):
@@ -131,7 +162,9 @@ def run(args: argparse.Namespace) -> int:
                 except Exception:
                     pass
                 for child in (*bridges, lms, *agents, recorder):
-                    if not child.alive():
+                    # the recorder ends by itself, cleanly, once it has the done Tick
+                    if not child.alive() and not (child is recorder
+                                                  and child.proc.returncode == 0):
                         return _fail(group, child, "exited early")
                 if not args.quiet and time.monotonic() - last_print >= 10:
                     last_print = time.monotonic()
@@ -152,21 +185,7 @@ def run(args: argparse.Namespace) -> int:
     finally:
         group.stop_all()
     wall = time.monotonic() - began
-    world_stats = _last_json(world)
-    bridge_stats = {c.name: _last_json(c) for c in (*bridges, lms)}
-    serial_errors = {name: s.get("serial_errors") for name, s in bridge_stats.items()}
-    hil = {
-        "hil": True,
-        "serial_errors": serial_errors,
-        "serial_errors_total": sum(v or 0 for v in serial_errors.values()),
-        "faults_injected": world_stats.get("faults_injected"),
-        "port_losses": sum(s.get("port_losses", 0) for s in bridge_stats.values()),
-        "scan_rate_hz": bridge_stats["bridge-lms"].get("scan_rate_hz"),
-        "lms_bytes_per_s": bridge_stats["bridge-lms"].get("bytes_per_s"),
-        "create_bytes_per_s": [bridge_stats[f"bridge{i}"].get("bytes_per_s") for i in range(n)],
-    }
-    (out / "hil.json").write_text(json.dumps({**hil, "world": world_stats,
-                                              "bridges": bridge_stats}, indent=1))
+    hil = hil_stats(out, n)
     print(f"\nbtrack sim --hil: run finished in {wall:.1f} s wall; recording {out / 'run.mcap'}")
     if args.no_report:
         print(json.dumps(hil, indent=2))
