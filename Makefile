@@ -20,7 +20,7 @@ test: $(STAMP)
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
-	$(BIN)/mypy agent wire localizer
+	$(BIN)/mypy agent wire localizer hwbridge
 
 bench: $(STAMP)
 	$(BIN)/python bench/speed.py

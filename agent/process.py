@@ -74,6 +74,9 @@ class AgentNode:
         self.followed_at: dict[int, int] = {}  # our last tick when we began to hear it
         self.sense: Sense | None = None
         self.pose: Pose | None = None
+        # by tick: with hardware a tick's Pose can come after the next tick's Sense
+        self.senses: dict[int, Sense] = {}
+        self.poses: dict[int, Pose] = {}
         self.last_k = -1
         self.dropped = 0
         self.ticks = 0
@@ -142,12 +145,14 @@ class AgentNode:
                 msg = decode(Sense, payload)
                 if msg.robot != self.robot:
                     raise DecodeError(f"sense for robot {msg.robot}")
-                self.sense = msg
+                self.senses[msg.k] = msg
+                self._prune(self.senses)
             elif kind == "pose":
                 pose = decode(Pose, payload)
                 if pose.robot != self.robot:
                     raise DecodeError(f"pose for robot {pose.robot}")
-                self.pose = pose
+                self.poses[pose.k] = pose
+                self._prune(self.poses)
             elif kind == "state":
                 state = decode(AgentState, payload)
                 if Keys.robot_of(key) != state.robot:
@@ -182,22 +187,33 @@ class AgentNode:
         return join_segment(lower, upper, edge_lo, edge_hi)
 
     def _neighbours_ready(self, k: int) -> bool:
-        """Whether every neighbour's state of tick k-1 is here. A neighbour we began to
-        hear only after our own tick k-1 (one that just became our neighbour) may have
-        published it before we listened: it is not waited for, and this tick acts on
-        what we have (the lockstep must not stall at every membership change)."""
+        """Whether every neighbour's state of tick k-1 is here; on the wall clock, where
+        ticks can be skipped, of our own previous tick if we skipped k-1 (in lockstep
+        that is k-1 itself), or any later one. A neighbour we began to hear only after
+        that tick (one that just became our neighbour) may have published it before we
+        listened: it is not waited for, and this tick acts on what we have (the lockstep
+        must not stall at every membership change). An agent joining a running team
+        waits for its neighbours' states of k-1 or later: it claims a share of them."""
+        need = k - 1 if self.last_k < 0 else min(k - 1, self.last_k)
         for rid in self.neighbours():
-            if rid is None or self.followed_at.get(rid, -1) >= k - 1:
+            if rid is None or self.followed_at.get(rid, -1) >= need:
                 continue
-            if (k - 1) not in self.states.get(rid, {}):
+            if max(self.states.get(rid, {}), default=-1) < need:
                 return False
         return True
 
+    def _prune(self, by_tick: dict[int, Any]) -> None:
+        for old in [k for k in by_tick if k <= self.last_k or k < max(by_tick) - HISTORY]:
+            del by_tick[old]
+
     def _ready_tick(self) -> int | None:
-        s, p = self.sense, self.pose
-        if s is None or p is None or s.k != p.k or s.k <= self.last_k:
+        """The newest tick after the last one done with both its Sense and its Pose."""
+        ready = [k for k in self.senses if k > self.last_k and k in self.poses]
+        if not ready:
             return None
-        return s.k
+        k = max(ready)
+        self.sense, self.pose = self.senses[k], self.poses[k]
+        return k
 
     def run(self) -> None:
         deadline: float | None = None
@@ -217,7 +233,8 @@ class AgentNode:
                 pass
             k = self._ready_tick()
             if k is None:
-                deadline = None
+                # Keep a running neighbour deadline: with hardware, tick k+1's Sense often
+                # comes before tick k's Pose, and resetting here would wait forever.
                 continue
             if k > 0 and not self._neighbours_ready(k):
                 if deadline is None:

@@ -19,6 +19,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "suite": ("deploy.suite", "the thesis's twelve cases, each a full team, and its tables"),
     "router": ("deploy.router", "a Zenoh router (the base station's), TLS and access control"),
     "deploy": ("deploy.cli", "a fleet's configurations, units and certificates from FLEET.toml"),
+    "bridge": ("hwbridge.cli", "real devices on the bus: iRobot Create, SICK LMS 2xx"),
 }
 
 

@@ -67,6 +67,11 @@ def build_parser() -> argparse.ArgumentParser:
                    "times drawn from SEED")
     p.add_argument("--no-report", action="store_true", help="skip the report at the end")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.add_argument("--hil", action="store_true",
+                   help="hardware in the loop: emulated Creates and LMS on pseudo-terminals "
+                        "behind the real bridges (btrack bridge); --duration is wall seconds")
+    p.add_argument("--hil-faults", type=float, metavar="P",
+                   help="with --hil: fraction of device messages damaged on purpose (0.005)")
     return p
 
 
@@ -212,6 +217,10 @@ def _fail(group: ProcessGroup, child: Child, what: str) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.hil:  # the hardware stack with emulated devices: hwbridge/hil.py
+        from hwbridge import hil
+
+        return hil.run(args)
     defaults = Gains()
     problems = check_gains(args.robots, defaults.k_phi if args.k_phi is None else args.k_phi,
                            defaults.k_s if args.k_s is None else args.k_s, 2.0)

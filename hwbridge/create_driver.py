@@ -1,0 +1,135 @@
+"""One iRobot Create on a serial port: transport + codec + model + watchdog, no bus.
+
+``CreateDriver`` is what the bridge process calls: ``poll`` reads and parses what
+arrived (reopening a lost port on its backoff, then Start, Safe/Full, the stream and
+zero wheels again), ``command`` drives the wheels and feeds the watchdog, ``tick`` stops
+the wheels when commands stopped and returns the sensing since the previous tick. The
+caller passes the time (a monotonic clock in the process shell).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+from hwbridge.create import codec as oi
+from hwbridge.create import model as cm
+from hwbridge.transport import SerialTransport
+
+log = logging.getLogger("btrack.bridge.create")
+
+
+@dataclass(frozen=True)
+class TickSensing:
+    ice: bool
+    algae: bool
+    odom_dist_m: float
+    odom_dtheta: float
+    reading: cm.Reading
+    frames: int  # stream frames since the previous tick
+
+
+class CreateDriver:
+    def __init__(self, port: str, spec: cm.ModelSpec, *, baud: int | None = None,
+                 oi_mode: str = "safe", ice: cm.IceSensor | None = None, algae_bit: int = 0,
+                 watchdog_s: float = 0.5, max_wheel_m_s: float = 0.5) -> None:
+        self.spec = spec
+        self.transport = SerialTransport(port, baud or spec.baud)
+        self.parser = oi.StreamParser(spec.stream_ids)
+        self.odometry = cm.Odometry(spec)
+        self.ice_sensor = ice or cm.IceSensor()
+        self.algae_bit = algae_bit
+        self.oi_mode = oi_mode
+        self.watchdog = cm.Watchdog(watchdog_s)
+        self.max_wheel = max_wheel_m_s
+        self.reading: cm.Reading | None = None
+        self.frames_since_tick = 0
+        self.mode_recoveries = 0
+        self.stopped_by_watchdog = False
+        self.wheels = (0, 0)
+        self.stale_s = 0.5  # no frame for this long: the robot is not sensing
+        self._last_frame: float | None = None
+        self._was_open = False
+
+    # connection ---------------------------------------------------------------
+    def open(self) -> None:
+        """Open now (raises transport.PortError) and start the robot."""
+        self.transport.open()
+        self._start_robot()
+
+    def _start_robot(self) -> None:
+        self._last_frame = None
+        self.parser.reset()
+        self.odometry.reset()
+        mode = oi.full() if self.oi_mode == "full" else oi.safe()
+        self.wheels = (0, 0)
+        self.transport.write(oi.start() + mode + oi.drive_direct(0, 0)
+                             + oi.stream(self.spec.stream_ids))
+        self._was_open = True
+
+    @property
+    def connected(self) -> bool:
+        return self.transport.is_open
+
+    @property
+    def serial_errors(self) -> int:
+        return self.parser.stats.errors + self.transport.stats.losses
+
+    def poll(self, now: float) -> None:
+        """Read and parse what arrived (waits up to the transport's read timeout)."""
+        if not self.transport.is_open:
+            if self._was_open:
+                log.warning("%s lost; the robot cannot be reached (reopening)",
+                            self.transport.port)
+                self._was_open = False
+            if self.transport.reopen(now):
+                self._start_robot()  # zero wheels before any command resumes
+            return
+        data = self.transport.read()
+        if not data:
+            return
+        for values in self.parser.feed(data):
+            self.reading = cm.reading_from(values)
+            self.odometry.update(values)
+            self.frames_since_tick += 1
+            self._last_frame = now
+
+    # commands -----------------------------------------------------------------
+    def _drive(self, right: int, left: int) -> None:
+        self.wheels = (right, left)
+        self.transport.write(oi.drive_direct(right, left))
+
+    def command(self, v: float, omega: float, now: float) -> None:
+        self.watchdog.feed(now)
+        self.stopped_by_watchdog = False
+        self._drive(*cm.wheels_from_cmd(v, omega, self.spec.wheel_base_m, self.max_wheel))
+
+    def tick(self, now: float) -> TickSensing | None:
+        """Once per control period: the watchdog, mode recovery, and the sensing since the
+        previous tick: the latest reading and the odometry since then, even if no frame
+        completed during this tick (a late frame's motion goes into the next tick); None
+        when no frame came for ``stale_s`` (the port is down or the robot silent)."""
+        if self.watchdog.expired(now):
+            if not self.stopped_by_watchdog and self.wheels != (0, 0):
+                log.warning("no command for %.1f s: stopping the wheels",
+                            self.watchdog.timeout_s)
+            self.stopped_by_watchdog = True
+            self._drive(0, 0)  # every tick while expired: a lost byte cannot keep it moving
+        r = self.reading
+        if r is not None and r.mode == "passive" and not r.wheel_drop and self.connected:
+            # The OI falls back to passive after a wheel drop or on the charger.
+            self.mode_recoveries += 1
+            self.transport.write(oi.full() if self.oi_mode == "full" else oi.safe())
+        frames, self.frames_since_tick = self.frames_since_tick, 0
+        if (r is None or self._last_frame is None or now - self._last_frame > self.stale_s
+                or not self.connected):
+            return None
+        dist, dtheta = self.odometry.take()
+        ice = self.ice_sensor.ice(r.cargo_analog)
+        algae = cm.algae_from_digital(r.cargo_digital, self.algae_bit)
+        return TickSensing(ice, algae, dist, dtheta, r, frames)
+
+    def close(self) -> None:
+        if self.transport.is_open:
+            self.transport.write(oi.drive_direct(0, 0) + oi.pause_resume(False))
+        self.transport.close()

@@ -1,0 +1,1 @@
+"""Byte-level device emulators (device side of our codecs) and their pseudo-terminals."""

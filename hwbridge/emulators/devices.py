@@ -1,0 +1,218 @@
+"""The devices' side of the protocols, as pure state machines (no I/O, no clock).
+
+``CreateDevice`` is an iRobot Create or Create 2 as the Open Interface describes it:
+modes (off, passive, safe, full; drive commands are ignored unless safe or full; a
+wheel drop in safe mode stops the wheels and falls back to passive), Drive Direct and
+Drive, the sensor stream and single reads, odometry accumulated "since last read" with
+the sub-unit remainder kept, encoder counters that wrap. ``LmsDevice`` is a SICK LMS 2xx:
+ACK or NAK for every telegram, mode and baud changes, the variant switch, measured values
+on request or continuously. The pty shells in ``pty.py`` drive them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from hwbridge.create import codec as oi
+from hwbridge.create.model import MM_PER_COUNT, ModelSpec
+from hwbridge.lms import codec as lms
+from hwbridge.lms.model import ScanGeometry
+
+MODE_NUMBERS = {"off": 0, "passive": 1, "safe": 2, "full": 3}
+
+
+@dataclass
+class CreateDevice:
+    spec: ModelSpec
+    mode: str = "off"
+    right_mm_s: int = 0
+    left_mm_s: int = 0
+    stream_ids: tuple[int, ...] = ()
+    streaming: bool = False
+    baud: int = 0
+    analog: int = 0  # cargo bay analog input, 0..1023
+    digital: int = 0  # cargo bay digital inputs
+    bumps: int = 0  # packet 7 bits
+    voltage_mv: int = 16000
+    charge_mah: int = 2500
+    capacity_mah: int = 3000
+    bad_commands: int = 0
+    _parser: oi.CommandParser = field(default_factory=oi.CommandParser)
+    _dist_mm: float = 0.0
+    _angle_deg: float = 0.0
+    _enc: list[float] = field(default_factory=lambda: [0.0, 0.0])
+
+    def __post_init__(self) -> None:
+        self.baud = self.baud or self.spec.baud
+
+    # commands from the host --------------------------------------------------
+    def receive(self, data: bytes) -> bytes:
+        """Apply the host's bytes; return what the robot answers at once."""
+        out = bytearray()
+        for op, args in self._parser.feed(data):
+            if op == oi.START:
+                self.mode = "passive"
+                self.streaming = False
+                self._stop()
+            elif self.mode == "off":
+                self.bad_commands += 1  # the OI ignores everything before Start
+            elif op == oi.SAFE:
+                self.mode = "safe"
+            elif op == oi.FULL:
+                self.mode = "full"
+            elif op == oi.CONTROL:
+                self.mode = "safe"
+            elif op == oi.BAUD:
+                rates = {code: rate for rate, code in oi.BAUD_CODES.items()}
+                self.baud = rates.get(args[0], self.baud)
+            elif op == oi.DRIVE_DIRECT:
+                if self.mode in ("safe", "full"):
+                    self.right_mm_s, self.left_mm_s = oi.parse_drive_direct(args)
+            elif op == oi.DRIVE:
+                if self.mode in ("safe", "full"):
+                    self._drive(args)
+            elif op in (oi.STREAM, oi.QUERY_LIST, oi.SENSORS):
+                ids = (args[0],) if op == oi.SENSORS else oi.parse_id_list(args)
+                if any(pid not in oi.PACKETS for pid in ids):
+                    self.bad_commands += 1
+                    continue
+                if op == oi.STREAM:
+                    self.stream_ids, self.streaming = ids, bool(ids)
+                else:
+                    values = self.take_values(ids)
+                    for pid in ids:
+                        out += oi.encode_packet(pid, values[pid])
+            elif op == oi.PAUSE_RESUME:
+                self.streaming = bool(args[0]) and bool(self.stream_ids)
+        self.bad_commands += self._parser.unknown
+        self._parser.unknown = 0
+        return bytes(out)
+
+    def _stop(self) -> None:
+        self.right_mm_s = self.left_mm_s = 0
+
+    def _drive(self, args: bytes) -> None:
+        v = int.from_bytes(args[0:2], "big", signed=True)
+        radius = int.from_bytes(args[2:4], "big", signed=True)
+        half_base = 500.0 * self.spec.wheel_base_m
+        if radius in (-32768, 32767):
+            r = left = v
+        elif radius == 1:  # spin counter-clockwise
+            r, left = v, -v
+        elif radius == -1:
+            r, left = -v, v
+        else:
+            r = int(v * (radius + half_base) / radius)
+            left = int(v * (radius - half_base) / radius)
+        self.right_mm_s, self.left_mm_s = oi.clamp_wheel(r), oi.clamp_wheel(left)
+
+    # the world acting on the robot ---------------------------------------------
+    def wheel_speeds(self) -> tuple[float, float]:
+        """(right, left) m/s the motors actually turn at."""
+        if self.mode not in ("safe", "full"):
+            return 0.0, 0.0
+        return self.right_mm_s / 1000.0, self.left_mm_s / 1000.0
+
+    def add_motion(self, dist_m: float, dtheta: float) -> None:
+        """What the wheel encoders measured over a physics step."""
+        half = 0.5 * dtheta * self.spec.wheel_base_m
+        self._dist_mm += dist_m * 1000.0
+        self._angle_deg += math.degrees(dtheta)
+        self._enc[0] += (dist_m - half) * 1000.0 / MM_PER_COUNT
+        self._enc[1] += (dist_m + half) * 1000.0 / MM_PER_COUNT
+
+    def set_wheel_drop(self, dropped: bool) -> None:
+        self.bumps = (self.bumps | 0x0C) if dropped else (self.bumps & ~0x1C)
+        if dropped and self.mode == "safe":  # the OI's safety reaction
+            self._stop()
+            self.mode = "passive"
+
+    # the robot's answers -------------------------------------------------------
+    def take_values(self, ids: tuple[int, ...]) -> dict[int, int]:
+        values: dict[int, int] = {}
+        for pid in ids:
+            if pid == 19:
+                report = int(self._dist_mm)  # toward zero; the rest stays for next time
+                self._dist_mm -= report
+                values[pid] = max(-32768, min(32767, report))
+            elif pid == 20:
+                report = int(self._angle_deg)
+                self._angle_deg -= report
+                values[pid] = max(-32768, min(32767, report))
+            elif pid in (43, 44):
+                values[pid] = int(math.floor(self._enc[pid - 43])) & 0xFFFF
+            else:
+                values[pid] = {
+                    7: self.bumps & 0x1F, 21: 0, 22: self.voltage_mv, 25: self.charge_mah,
+                    26: self.capacity_mah, 32: self.digital & 0x1F, 33: self.analog & 0x3FF,
+                    35: MODE_NUMBERS[self.mode],
+                }[pid]
+        return values
+
+    def stream_frame(self) -> bytes | None:
+        """The next stream frame, or None when not streaming."""
+        if not self.streaming:
+            return None
+        return oi.encode_stream_frame(self.stream_ids, self.take_values(self.stream_ids))
+
+
+@dataclass
+class LmsDevice:
+    geometry: ScanGeometry = field(default_factory=ScanGeometry)
+    unit: int = lms.UNIT_MM
+    baud: int = lms.POWER_UP_BAUD
+    continuous: bool = False
+    ranges_m: list[float] = field(default_factory=list)
+    naks: int = 0
+    _parser: lms.TelegramParser = field(
+        default_factory=lambda: lms.TelegramParser(expect_reply=False))
+
+    def receive(self, data: bytes) -> tuple[bytes, int | None]:
+        """Answer the host's bytes: (bytes to send, a new baud to switch to after them)."""
+        out = bytearray()
+        new_baud: int | None = None
+        before = self._parser.stats.bad_crc
+        items = self._parser.feed(data)
+        for _ in range(self._parser.stats.bad_crc - before):
+            out.append(lms.NAK)
+            self.naks += 1
+        for item in items:
+            if not isinstance(item, lms.Telegram):
+                continue
+            out.append(lms.ACK)
+            cmd, args = item.command, item.data
+            if cmd == lms.MODE and args:
+                mode = args[0]
+                ok = mode in (lms.CONTINUOUS, lms.STOP_CONTINUOUS) or mode in lms.MODE_BAUDS
+                if mode == lms.CONTINUOUS:
+                    self.continuous = True
+                elif mode == lms.STOP_CONTINUOUS:
+                    self.continuous = False
+                elif mode in lms.MODE_BAUDS:
+                    new_baud = lms.MODE_BAUDS[mode]
+                out += lms.reply(lms.MODE, bytes([0x00 if ok else 0x01]))
+            elif cmd == lms.REQUEST_VALUES:
+                out += self.values_telegram()
+            elif cmd == lms.VARIANT and len(args) == 4:
+                angle = int.from_bytes(args[0:2], "little")
+                res = int.from_bytes(args[2:4], "little")
+                try:
+                    self.geometry = ScanGeometry(angle, res, self.geometry.range_max_m)
+                    switched = 1
+                except ValueError:
+                    switched = 0
+                g = self.geometry
+                out += lms.reply(lms.VARIANT, bytes([switched]) + g.angle_deg.to_bytes(2, "little")
+                                 + g.resolution_centideg.to_bytes(2, "little"))
+            else:
+                out += lms.reply(cmd, b"")  # acknowledged, nothing to report
+        if new_baud is not None:
+            self.baud = new_baud
+        return bytes(out), new_baud
+
+    def values_telegram(self) -> bytes:
+        n = self.geometry.beams
+        ranges = (self.ranges_m + [math.inf] * n)[:n]
+        return lms.reply(lms.REQUEST_VALUES,
+                         lms.encode_values(lms.ranges_to_values(ranges, self.unit), self.unit))

@@ -1,0 +1,227 @@
+"""Emulated devices on real pseudo-terminals.
+
+``PtyPort`` owns a pty pair and a stable symlink to its slave (like udev's
+``/dev/serial/by-id`` names), which the bridge opens with pyserial; ``unplug`` closes
+the pair (the bridge's reads fail as with a pulled USB adapter) and ``plug`` makes a new
+one behind the same name. ``CreateEmulator`` and ``LmsEmulator`` run a device core
+(``devices.py``) on a thread: they answer commands, send the Create's stream every
+15 ms, and send the LMS's scans no faster than the mirror (75 Hz, two turns per
+interlaced 0.5 degree scan) and the line (10 bits per byte at the current baud) allow.
+``Faults`` corrupts the device's output on purpose, from a seed, to test resync.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import os
+import random
+import select
+import threading
+import time
+import tty
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from hwbridge.create.model import ModelSpec
+from hwbridge.emulators.devices import CreateDevice, LmsDevice
+
+CREATE_FRAME_S = 0.015
+LMS_SCAN_S = 2.0 / 75.0  # interlaced 0.5 degree scan: two mirror turns
+
+
+class PtyPort:
+    def __init__(self, link: str | Path) -> None:
+        self.link = Path(link)
+        self.master = -1
+        self.slave = -1
+        self.dropped_bytes = 0  # written while the line was full (nobody reading)
+        self.plug()
+
+    @property
+    def plugged(self) -> bool:
+        return self.master >= 0
+
+    def plug(self) -> None:
+        if self.plugged:
+            return
+        master, slave = os.openpty()
+        tty.setraw(slave)  # no echo, no line editing: bytes pass unchanged
+        os.set_blocking(master, False)
+        self.master, self.slave = master, slave
+        tmp = self.link.with_name(self.link.name + ".tmp")
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+        tmp.symlink_to(os.ttyname(slave))
+        os.replace(tmp, self.link)
+
+    def unplug(self) -> None:
+        for fd in (self.master, self.slave):
+            if fd >= 0:
+                with contextlib.suppress(OSError):
+                    os.close(fd)
+        self.master = self.slave = -1
+
+    def close(self) -> None:
+        self.unplug()
+        with contextlib.suppress(FileNotFoundError):
+            self.link.unlink()
+
+    def read(self, timeout_s: float) -> bytes:
+        if not self.plugged:
+            time.sleep(timeout_s)
+            return b""
+        fd = self.master
+        try:  # unplug() may close fd from another thread at any moment
+            ready, _, _ = select.select([fd], [], [], max(0.0, timeout_s))
+            return os.read(fd, 4096) if ready else b""
+        except (OSError, ValueError) as exc:
+            if isinstance(exc, ValueError) or exc.errno in (errno.EAGAIN, errno.EIO, errno.EBADF):
+                return b""
+            raise
+
+    def write(self, data: bytes) -> None:
+        if not self.plugged:
+            return
+        try:
+            n = os.write(self.master, data)
+        except OSError as exc:
+            if exc.errno not in (errno.EAGAIN, errno.EIO, errno.EBADF):
+                raise
+            n = 0
+        self.dropped_bytes += len(data) - n
+
+
+@dataclass
+class Faults:
+    """Damage done to the device's output, each with its probability per message."""
+
+    garbage: float = 0.0  # random bytes before the message
+    corrupt: float = 0.0  # one byte of the message flipped
+    truncate: float = 0.0  # the message cut short
+    seed: int = 0
+    injected: int = 0
+    _rng: random.Random = field(init=False)
+
+    def __post_init__(self) -> None:
+        self._rng = random.Random(self.seed)
+
+    def apply(self, msg: bytes) -> bytes:
+        rng = self._rng
+        out = msg
+        if self.corrupt and rng.random() < self.corrupt:
+            b = bytearray(out)
+            b[rng.randrange(len(b))] ^= 1 << rng.randrange(8)
+            out = bytes(b)
+            self.injected += 1
+        if self.truncate and rng.random() < self.truncate:
+            out = out[: rng.randrange(1, len(out))]
+            self.injected += 1
+        if self.garbage and rng.random() < self.garbage:
+            out = bytes(rng.randrange(256) for _ in range(rng.randrange(1, 20))) + out
+            self.injected += 1
+        return out
+
+
+class _Emulator:
+    def __init__(self, link: str | Path, faults: Faults | None) -> None:
+        self.port = PtyPort(link)
+        self.faults = faults or Faults()
+        self.lock = threading.Lock()
+        self.bytes_out = 0
+        self.bytes_in = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    @property
+    def path(self) -> str:
+        return str(self.port.link)
+
+    def start(self) -> _Emulator:
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(2.0)
+        self.port.close()
+
+    def _send(self, data: bytes, damage: bool = True) -> None:
+        if damage:
+            data = self.faults.apply(data)
+        self.port.write(data)
+        self.bytes_out += len(data)
+
+    def _run(self) -> None:  # pragma: no cover - overridden
+        raise NotImplementedError
+
+
+class CreateEmulator(_Emulator):
+    """An iRobot Create (or Create 2) on a pty."""
+
+    def __init__(self, link: str | Path, spec: ModelSpec, faults: Faults | None = None) -> None:
+        super().__init__(link, faults)
+        self.device = CreateDevice(spec)
+        self.frames = 0
+
+    def _run(self) -> None:
+        next_frame = time.monotonic()
+        while not self._stop.is_set():
+            data = self.port.read(max(0.0, next_frame - time.monotonic()))
+            if data:
+                self.bytes_in += len(data)
+                with self.lock:
+                    answer = self.device.receive(data)
+                if answer:
+                    self._send(answer, damage=False)
+            now = time.monotonic()
+            if now >= next_frame:
+                next_frame += CREATE_FRAME_S
+                if now > next_frame:  # fell behind (a loaded machine): do not burst
+                    next_frame = now + CREATE_FRAME_S
+                with self.lock:
+                    frame = self.device.stream_frame()
+                if frame is not None and self.port.plugged:
+                    self._send(frame)
+                    self.frames += 1
+
+
+class LmsEmulator(_Emulator):
+    """A SICK LMS 2xx on a pty; ``ranges`` gives the scene's current ranges."""
+
+    def __init__(self, link: str | Path, ranges: Callable[[], list[float]] | None = None,
+                 faults: Faults | None = None) -> None:
+        super().__init__(link, faults)
+        self.device = LmsDevice()
+        self.ranges = ranges
+        self.scans = 0
+
+    def _run(self) -> None:
+        line_free = time.monotonic()  # when the line has sent what we wrote
+        next_scan = time.monotonic()
+        while not self._stop.is_set():
+            now = time.monotonic()
+            wait = max(0.0, min(0.02, next_scan - now)) if self.device.continuous else 0.02
+            data = self.port.read(wait)
+            if data:
+                self.bytes_in += len(data)
+                with self.lock:
+                    answer, _ = self.device.receive(data)
+                    baud = self.device.baud
+                if answer:
+                    # The reply goes out at the old baud; switching after it is enough here.
+                    self._send(answer, damage=False)
+                    line_free = max(line_free, time.monotonic()) + len(answer) * 10.0 / baud
+            now = time.monotonic()
+            if self.device.continuous and now >= max(next_scan, line_free):
+                if self.ranges is not None:
+                    self.device.ranges_m = self.ranges()
+                with self.lock:
+                    tel = self.device.values_telegram()
+                    baud = self.device.baud
+                if self.port.plugged:
+                    self._send(tel)
+                    self.scans += 1
+                line_free = now + len(tel) * 10.0 / baud
+                next_scan = now + LMS_SCAN_S

@@ -1,0 +1,1 @@
+"""SICK LMS 2xx serial telegrams: codec and model."""

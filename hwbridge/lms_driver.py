@@ -1,0 +1,133 @@
+"""One SICK LMS 2xx on a serial port: transport + telegram codec + scan geometry, no bus.
+
+Start-up: find the sensor at 9600 baud (its power-up rate) or already at the target
+rate, stop continuous output, switch to the target baud (38400 by default; 500000 needs
+RS-422), select the 180 degree / 0.5 degree variant, start continuous output. ``poll``
+returns the scans that arrived, in metres. A lost port is reopened on a backoff and the
+start-up runs again.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+
+from hwbridge.lms import codec as lms
+from hwbridge.lms.model import ScanGeometry
+from hwbridge.transport import PortError, SerialTransport
+
+log = logging.getLogger("btrack.bridge.lms")
+
+REPLY_TIMEOUT_S = 0.5
+
+
+class LmsError(Exception):
+    """The sensor does not answer as an LMS 2xx should."""
+
+
+class LmsDriver:
+    def __init__(self, port: str, baud: int = 38400, geometry: ScanGeometry | None = None,
+                 unit: int = lms.UNIT_MM) -> None:
+        if baud not in lms.BAUD_MODES:
+            raise LmsError(f"the LMS has no {baud} baud mode (9600, 19200, 38400, 500000)")
+        self.target_baud = baud
+        self.geometry = geometry or ScanGeometry()
+        self.unit = unit
+        self.transport = SerialTransport(port, lms.POWER_UP_BAUD)
+        self.parser = lms.TelegramParser(expect_reply=True)
+        self.scans = 0
+        self.bad_scans = 0
+        self.restarts = 0
+        self._was_open = False
+
+    @property
+    def serial_errors(self) -> int:
+        s = self.parser.stats
+        return s.errors + s.naks + self.bad_scans + self.transport.stats.losses
+
+    def _transact(self, telegram: bytes, reply_cmd: int, tries: int = 3) -> lms.Telegram:
+        """Send, wait for ACK and the reply (resending after a NAK or a timeout)."""
+        for _ in range(tries):
+            if not self.transport.write(telegram):
+                raise LmsError("port lost during start-up")
+            deadline = time.monotonic() + REPLY_TIMEOUT_S
+            while time.monotonic() < deadline:
+                for item in self.parser.feed(self.transport.read()):
+                    if item == lms.NAK:
+                        deadline = 0.0  # resend
+                        break
+                    if isinstance(item, lms.Telegram) and item.command == reply_cmd:
+                        return item
+                if not self.transport.is_open:
+                    raise LmsError("port lost during start-up")
+        raise LmsError(f"no reply 0x{reply_cmd:02X} from the sensor")
+
+    def _start_sensor(self) -> None:
+        self.parser.reset()
+        for rate in dict.fromkeys((lms.POWER_UP_BAUD, self.target_baud)):
+            self.transport.set_baud(rate)
+            try:
+                self._transact(lms.mode_change(lms.STOP_CONTINUOUS), lms.MODE_REPLY, tries=2)
+                break
+            except LmsError:
+                continue
+        else:
+            raise LmsError(f"no LMS answers on {self.transport.port} at 9600 or "
+                           f"{self.target_baud} baud")
+        if self.transport.baud != self.target_baud:
+            rep = self._transact(lms.set_baud(self.target_baud), lms.MODE_REPLY)
+            if rep.data[:1] != b"\x00":
+                raise LmsError(f"the sensor refused {self.target_baud} baud")
+            self.transport.set_baud(self.target_baud)
+        g = self.geometry
+        rep = self._transact(lms.variant(g.angle_deg, g.resolution_centideg), lms.VARIANT_REPLY)
+        if rep.data[:1] != b"\x01":
+            raise LmsError(f"the sensor refused the {g.angle_deg} deg / "
+                           f"{g.resolution_centideg / 100:g} deg variant")
+        self._transact(lms.mode_change(lms.CONTINUOUS), lms.MODE_REPLY)
+        self._was_open = True
+
+    def open(self) -> None:
+        """Open and start continuous output, or raise PortError / LmsError."""
+        self.transport.open()
+        try:
+            self._start_sensor()
+        except LmsError:
+            self.transport.close()
+            raise
+
+    def poll(self, now: float) -> list[list[float]]:
+        """Scans (ranges in m, beam 0 on the right) that arrived since the last call."""
+        if not self.transport.is_open:
+            if self._was_open:
+                log.warning("%s lost (reopening)", self.transport.port)
+                self._was_open = False
+            if self.transport.reopen(now):
+                self.restarts += 1
+                try:
+                    self._start_sensor()
+                except (LmsError, PortError) as exc:
+                    log.warning("restart failed: %s", exc)
+                    self.transport.close()
+            return []
+        out: list[list[float]] = []
+        for item in self.parser.feed(self.transport.read()):
+            if not isinstance(item, lms.Telegram) or item.command != lms.VALUES_REPLY:
+                continue
+            try:
+                unit, raw = lms.decode_values(item.data)
+            except lms.CodecError:
+                self.bad_scans += 1
+                continue
+            if len(raw) != self.geometry.beams:
+                self.bad_scans += 1
+                continue
+            rmax = self.geometry.range_max_m if unit == lms.UNIT_MM else 81.83
+            out.append(lms.values_to_ranges(unit, raw, rmax))
+            self.scans += 1
+        return out
+
+    def close(self) -> None:
+        if self.transport.is_open:
+            self.transport.write(lms.mode_change(lms.STOP_CONTINUOUS))
+        self.transport.close()

@@ -1,0 +1,261 @@
+"""Codecs of the iRobot Open Interface and the SICK LMS 2xx telegrams: example frames
+worked out from the documented algorithms, round trips, resync after garbage."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from hwbridge.create import codec as oi
+from hwbridge.create import model as cm
+from hwbridge.lms import codec as lms
+from hwbridge.lms.model import ScanGeometry
+
+# --- Open Interface ---------------------------------------------------------------
+
+
+def test_commands_bytes() -> None:
+    assert oi.start() == b"\x80"
+    assert oi.safe() == b"\x83"
+    assert oi.full() == b"\x84"
+    assert oi.baud(57600) == bytes([129, 10])
+    assert oi.baud(115200) == bytes([129, 11])
+    # drive direct: right 200 mm/s, left -200 mm/s, big-endian signed
+    assert oi.drive_direct(200, -200) == bytes([145, 0x00, 0xC8, 0xFF, 0x38])
+    assert oi.drive_direct(900, -900) == bytes([145, 0x01, 0xF4, 0xFE, 0x0C])  # +-500
+    assert oi.stream([7, 19, 20]) == bytes([148, 3, 7, 19, 20])
+    assert oi.pause_resume(False) == bytes([150, 0])
+    assert oi.sensors(35) == bytes([142, 35])
+    assert oi.query_list([43, 44]) == bytes([149, 2, 43, 44])
+    with pytest.raises(oi.CodecError):
+        oi.stream([99])
+
+
+def test_stream_frame_worked_by_hand() -> None:
+    # distance -5 mm (0xFFFB) and angle +3 degrees: 19 6 19 FF FB 20 00 03 checksum
+    frame = oi.encode_stream_frame((19, 20), {19: -5, 20: 3})
+    body = bytes([19, 6, 19, 0xFF, 0xFB, 20, 0x00, 0x03])
+    assert frame[:-1] == body
+    assert frame[-1] == (256 - sum(body) % 256) % 256 == 0xC3  # 573 = 2 * 256 + 61
+    assert sum(frame) % 256 == 0
+    assert oi.StreamParser((19, 20)).feed(frame) == [{19: -5, 20: 3}]
+
+
+FULL_VALUES = {7: 0x03, 19: -120, 20: 45, 21: 2, 22: 16200, 25: 2500, 26: 3000, 32: 0x01,
+               33: 1023, 35: 2, 43: 65535, 44: 1}
+
+
+def test_every_packet_round_trips() -> None:
+    ids = tuple(sorted(oi.PACKETS))
+    parser = oi.StreamParser(ids)
+    assert parser.feed(oi.encode_stream_frame(ids, FULL_VALUES)) == [FULL_VALUES]
+
+
+@given(st.lists(st.tuples(st.integers(-32768, 32767), st.integers(-32768, 32767),
+                          st.integers(0, 1023), st.integers(0, 3)), min_size=1, max_size=5),
+       st.binary(max_size=40))
+def test_stream_round_trip_after_garbage(frames: list[tuple[int, int, int, int]],
+                                         garbage: bytes) -> None:
+    ids = oi.CREATE_STREAM
+    want = []
+    data = bytearray(garbage.replace(bytes([19]), b""))  # garbage with no false header
+    for d, a, analog, mode in frames:
+        values = {**FULL_VALUES, 19: d, 20: a, 33: analog, 35: mode}
+        want.append({pid: values[pid] for pid in ids})
+        data += oi.encode_stream_frame(ids, values)
+    parser = oi.StreamParser(ids)
+    got = []
+    for i in range(0, len(data), 7):  # arrives in pieces
+        got += parser.feed(bytes(data[i : i + 7]))
+    assert got == want
+
+
+def test_stream_parser_resyncs_after_bad_checksum_and_truncation() -> None:
+    ids = (7, 19, 20)
+    good = oi.encode_stream_frame(ids, {7: 0, 19: 10, 20: 1})
+    bad = bytearray(good)
+    bad[-1] ^= 0x55
+    truncated = good[:5]
+    parser = oi.StreamParser(ids)
+    out = parser.feed(bytes([19, 19, 0, 7]) + bytes(bad) + truncated + good + good)
+    assert out == [{7: 0, 19: 10, 20: 1}] * 2
+    assert parser.stats.bad_checksum >= 1
+    assert parser.stats.errors >= 2
+
+
+def test_command_parser_device_side() -> None:
+    p = oi.CommandParser()
+    data = (oi.start() + oi.safe() + b"\x07" + oi.drive_direct(100, -50)
+            + oi.stream([7, 19]) + oi.pause_resume(True))
+    got = p.feed(data[:6]) + p.feed(data[6:])
+    assert [op for op, _ in got] == [128, 131, 145, 148, 150]
+    assert oi.parse_drive_direct(got[2][1]) == (100, -50)
+    assert oi.parse_id_list(got[3][1]) == (7, 19)
+    assert p.unknown == 1
+
+
+def test_readings_in_si() -> None:
+    r = cm.reading_from(FULL_VALUES)
+    assert r.bump_left and r.bump_right and not r.wheel_drop
+    assert r.voltage_v == pytest.approx(16.2) and r.charge_ah == pytest.approx(2.5)
+    assert r.mode == "safe" and r.cargo_analog == 1023
+    assert cm.reading_from({7: 0x08}).wheel_drop  # left wheel drop bit 3
+    assert cm.IceSensor(500).ice(500) and not cm.IceSensor(500).ice(499)
+    assert not cm.IceSensor(500, invert=True).ice(800)
+    assert cm.algae_from_digital(0b0001) and not cm.algae_from_digital(0b0010)
+
+
+def test_packet_odometry_create() -> None:
+    odo = cm.Odometry(cm.MODELS["create"])
+    odo.update({19: 12, 20: 90})
+    odo.update({19: -2, 20: -45})
+    d, th = odo.take()
+    assert d == pytest.approx(0.010) and th == pytest.approx(math.pi / 4)
+    assert odo.take() == (0.0, 0.0)
+
+
+def test_encoder_odometry_wraps() -> None:
+    assert cm.wrap_counts(5, 65530) == 11
+    assert cm.wrap_counts(65530, 5) == -11
+    odo = cm.Odometry(cm.MODELS["create2"])
+    odo.update({43: 65000, 44: 65000})  # reference only
+    odo.update({43: (65000 + 1000) % 65536, 44: (65000 + 1000) % 65536})  # both wrap
+    d, th = odo.take()
+    assert d == pytest.approx(1000 * math.pi * 72.0 / 508.8 / 1000.0)
+    assert th == pytest.approx(0.0)
+    odo.update({43: 10, 44: 10 + 100})  # right wheel ahead: counter-clockwise
+    d, th = odo.take()
+    assert th == pytest.approx(100 * cm.MM_PER_COUNT / 1000.0 / 0.235)
+
+
+def test_wheels_and_watchdog() -> None:
+    assert cm.wheels_from_cmd(0.2, 0.0, 0.26) == (200, 200)
+    r, left = cm.wheels_from_cmd(0.5, 2.0, 0.26)  # scaled, curvature kept
+    assert max(abs(r), abs(left)) == 500 and r > left
+    wd = cm.Watchdog(0.5)
+    assert wd.expired(0.0)  # never commanded
+    wd.feed(1.0)
+    assert not wd.expired(1.4)
+    assert wd.expired(1.6) and wd.expired(1.7)
+    assert wd.trips == 1
+
+
+# --- SICK LMS 2xx -----------------------------------------------------------------
+
+# Telegrams published with their CRC (LMS 2xx telegram listings); ours must agree.
+DOCUMENTED = [
+    ("02 00 02 00 20 24", "34 08"),  # continuous output of all values
+    ("02 00 02 00 20 25", "35 08"),  # stop continuous output
+    ("02 00 02 00 30 01", "31 18"),  # request one scan
+    ("02 00 02 00 20 42", "52 08"),  # 9600 baud
+    ("02 00 01 00 31", "15 12"),  # status request
+    ("02 80 03 00 A0 00 10", "16 0A"),  # reply: mode change accepted, status 0x10
+]
+
+
+@pytest.mark.parametrize("body,crc", DOCUMENTED)
+def test_sick_crc_matches_documented_telegrams(body: str, crc: str) -> None:
+    b = bytes.fromhex(body)
+    assert lms.crc16(b).to_bytes(2, "little") == bytes.fromhex(crc)
+
+
+def test_sick_crc_first_steps_by_hand() -> None:
+    # STX alone: crc 0 -> shift 0 -> xor (0 << 8 | 0x02) = 0x0002
+    assert lms.crc16(b"\x02") == 0x0002
+    # then 0x00: shift -> 0x0004, xor (0x02 << 8 | 0x00) = 0x0204
+    assert lms.crc16(b"\x02\x00") == 0x0204
+    # 0x80 0x00 0x00: 0x0080, then 0x0100 ^ 0x8000 = 0x8100, then the top bit shifts
+    # out and xors the generator: 0x0200 ^ 0x8005 = 0x8205 (xor 0x0000)
+    assert lms.crc16(b"\x80\x00\x00") == 0x8205
+
+
+def test_host_telegrams() -> None:
+    assert lms.mode_change(lms.CONTINUOUS) == bytes.fromhex("020002002024 3408")
+    assert lms.set_baud(9600) == bytes.fromhex("020002002042 5208")
+    assert lms.request_values() == bytes.fromhex("020002003001 3118")
+    v = lms.variant(180, 50)
+    assert v[:9] == bytes.fromhex("02 00 05 00 3B B4 00 32 00")
+    assert lms.crc16(v[:-2]).to_bytes(2, "little") == v[-2:]
+    with pytest.raises(lms.CodecError):
+        lms.set_baud(115200)
+
+
+def test_measured_values_mm_and_cm() -> None:
+    geom = ScanGeometry()
+    assert geom.beams == 361
+    ranges = [1.0 + 0.01 * j for j in range(geom.beams)]
+    ranges[5] = math.inf
+    raw = lms.ranges_to_values(ranges, lms.UNIT_MM)
+    data = lms.encode_values(raw, lms.UNIT_MM) + b"\x10"
+    assert int.from_bytes(data[:2], "little") == 361 | 0x4000
+    tel = lms.reply(lms.REQUEST_VALUES, data[:-1])
+    assert len(tel) == 732  # the size HARDWARE_NOTES gives for 361 values
+    (parsed,) = lms.TelegramParser().feed(tel)
+    assert isinstance(parsed, lms.Telegram) and parsed.command == lms.VALUES_REPLY
+    unit, vals = lms.decode_values(parsed.data)
+    out = lms.values_to_ranges(unit, vals, geom.range_max_m)
+    assert out[5] == geom.range_max_m
+    assert out[0] == pytest.approx(1.0) and out[360] == pytest.approx(4.6)
+    cm_data = lms.encode_values(lms.ranges_to_values([2.5, 30.0], lms.UNIT_CM), lms.UNIT_CM)
+    unit, vals = lms.decode_values(cm_data + b"\x10")
+    assert unit == lms.UNIT_CM and vals == [250, 3000]
+    assert lms.values_to_ranges(unit, vals, 81.83) == pytest.approx([2.5, 30.0])
+    # flag bits above the 13 distance bits are masked off
+    flagged = (361 | 0x4000).to_bytes(2, "little") + (0x2000 | 1500).to_bytes(2, "little") * 361
+    assert lms.decode_values(flagged + b"\x10")[1][0] == 1500
+
+
+def test_telegram_parser_ack_nak_and_resync() -> None:
+    good = lms.reply(lms.MODE, b"\x00")
+    bad = bytearray(good)
+    bad[5] ^= 0xFF
+    stream = (bytes([lms.ACK, lms.NAK]) + b"\xff\x02\x80\x06" + bytes(bad) + good[:4]
+              + good)
+    p = lms.TelegramParser()
+    out = []
+    for b in stream:
+        out += p.feed(bytes([b]))
+    tels = [x for x in out if isinstance(x, lms.Telegram)]
+    assert tels == [lms.Telegram(0x80, lms.MODE_REPLY, b"\x00\x10")]
+    assert lms.ACK in out and lms.NAK in out
+    assert p.stats.errors >= 1
+
+
+@settings(max_examples=30)
+@given(st.lists(st.integers(0, 8183), min_size=1, max_size=401), st.binary(max_size=30))
+def test_values_round_trip_after_garbage(raw: list[int], garbage: bytes) -> None:
+    tel = lms.reply(lms.REQUEST_VALUES, lms.encode_values(raw))
+    p = lms.TelegramParser()
+    out = [x for x in p.feed(garbage.replace(b"\x02", b"") + tel)
+           if isinstance(x, lms.Telegram)]
+    assert len(out) == 1
+    assert lms.decode_values(out[0].data) == (lms.UNIT_MM, raw)
+
+
+def test_host_side_parser_reads_host_telegrams() -> None:
+    p = lms.TelegramParser(expect_reply=False)
+    (t,) = p.feed(lms.variant(100, 25))
+    assert isinstance(t, lms.Telegram)
+    assert t.command == lms.VARIANT and t.data == bytes([100, 0, 25, 0])
+    with pytest.raises(ValueError):
+        ScanGeometry(180, 25)
+
+
+def test_scan_message_on_the_wire() -> None:
+    from wire import DecodeError, Keys, Scan, decode, encode
+
+    def scan(ranges: list[float], step: float = math.radians(0.5)) -> Scan:
+        return Scan(t=1.5, k=7, ranges=ranges, scanner_x=3.0, scanner_y=-2.0,
+                    scanner_theta=1.57, angle_min=-math.pi / 2, angle_step=step,
+                    range_max=8.183)
+
+    good = scan([1.0, 8.183])
+    assert decode(Scan, encode(good)) == good
+    assert Keys("btrack/lab").scan() == "btrack/lab/laser/scan"
+    for bad in (scan([]), scan([-1.0]), scan([1.0], step=0.0)):
+        with pytest.raises(DecodeError):
+            decode(Scan, encode(bad))
+
