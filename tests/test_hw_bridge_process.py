@@ -92,7 +92,7 @@ def test_lms_bridge_process(tmp_path: Path) -> None:
     assert len(s.ranges) == 361 and s.ranges[180] == 1.5 and s.ranges[0] == 3.0
     assert math.isclose(s.angle_min, -math.pi / 2) and math.isclose(s.angle_step,
                                                                       math.radians(0.5))
-    assert (s.x, s.y) == (3.0, -2.0)
+    assert (s.scanner_x, s.scanner_y) == (3.0, -2.0)
     summary = _summary(proc)
     assert summary["scans"] >= 5 and summary["baud"] == 500000
 
