@@ -3,34 +3,8 @@
 from __future__ import annotations
 
 import argparse
-import contextlib
-import os
 import signal
-import sys
-import threading
-from collections.abc import Callable, Iterator
-
-import zenoh
-
-from wire.session import SessionOptions, open_session
-
-CLOSE_TIMEOUT_S = 3.0
-
-
-@contextlib.contextmanager
-def bounded_session(opts: SessionOptions) -> Iterator[zenoh.Session]:
-    """A session closed on exit, without letting a slow close hang the process."""
-    session = open_session(opts)
-    try:
-        yield session
-    finally:
-        closer = threading.Thread(target=session.close, daemon=True)
-        closer.start()
-        closer.join(CLOSE_TIMEOUT_S)
-        if closer.is_alive():
-            sys.stdout.flush()
-            sys.stderr.flush()
-            os._exit(0)
+from collections.abc import Callable
 
 
 def on_stop(callback: Callable[[], None]) -> None:

@@ -18,13 +18,18 @@ import queue
 import sys
 import time
 
-from hwbridge.common import add_epoch_arg, bounded_session, on_stop, parse_floats
+from hwbridge.common import add_epoch_arg, on_stop, parse_floats
 from hwbridge.create import model as cm
 from hwbridge.create_driver import CreateDriver
 from hwbridge.runclock import RunClock, tick_of
 from hwbridge.transport import PortError
 from wire import Cmd, DecodeError, Keys, Sense, decode, encode
-from wire.session import add_session_args, declare_publisher, options_from_args
+from wire.session import (
+    add_session_args,
+    bounded_session,
+    declare_publisher,
+    options_from_args,
+)
 
 log = logging.getLogger("btrack.bridge.create")
 
@@ -98,7 +103,7 @@ def main(argv: list[str] | None = None) -> int:
 
     counts = {"ticks": 0, "sense": 0, "missed_ticks": 0, "cmds": 0, "dropped": 0}
     began = time.monotonic()
-    with bounded_session(options_from_args(args)) as session:
+    with bounded_session(options_from_args(args), "btrack bridge") as session:
         pub = declare_publisher(session, keys.sense(args.id))
         sub = session.declare_subscriber(keys.cmd(args.id),
                                          lambda s: events.put(s.payload.to_bytes()))

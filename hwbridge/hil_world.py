@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import zenoh
 
-from hwbridge.common import add_epoch_arg, bounded_session, on_stop
+from hwbridge.common import add_epoch_arg, on_stop
 from hwbridge.create.model import MODELS
 from hwbridge.emulators.pty import CreateEmulator, Faults, LmsEmulator
 from hwbridge.lms.model import ScanGeometry
@@ -42,7 +42,12 @@ from hwbridge.runclock import RunClock, tick_of
 from simworld.maps import MapError, load_map
 from simworld.world import ROBOT_RADIUS_M, World, parse_start
 from wire import Keys, Pose, Tick, Truth, WorldInfo, encode
-from wire.session import add_session_args, declare_publisher, options_from_args
+from wire.session import (
+    add_session_args,
+    bounded_session,
+    declare_publisher,
+    options_from_args,
+)
 
 log = logging.getLogger("btrack.hil")
 
@@ -296,7 +301,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     world = World(gmap, args.robots, args.start, args.seed, args.odom_noise)
     clock = RunClock(args.epoch)
-    with bounded_session(options_from_args(args)) as session:
+    with bounded_session(options_from_args(args), "btrack bridge") as session:
         hil = HilWorld(args, world, session)
 
         def stop() -> None:

@@ -16,13 +16,18 @@ import math
 import sys
 import time
 
-from hwbridge.common import add_epoch_arg, bounded_session, on_stop, parse_floats
+from hwbridge.common import add_epoch_arg, on_stop, parse_floats
 from hwbridge.lms.model import ScanGeometry
 from hwbridge.lms_driver import LmsDriver, LmsError
 from hwbridge.runclock import RunClock
 from hwbridge.transport import PortError
 from wire import Keys, Scan, encode
-from wire.session import add_session_args, declare_publisher, options_from_args
+from wire.session import (
+    add_session_args,
+    bounded_session,
+    declare_publisher,
+    options_from_args,
+)
 
 log = logging.getLogger("btrack.bridge.lms")
 
@@ -72,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
 
     began = time.monotonic()
     k = 0
-    with bounded_session(options_from_args(args)) as session:
+    with bounded_session(options_from_args(args), "btrack bridge") as session:
         pub = declare_publisher(session, keys.scan())
         on_stop(stop)
         try:

@@ -9,15 +9,12 @@ on SIGTERM/SIGINT, and always leaves a finished, readable MCAP file.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
-import os
 import queue
 import signal
 import sys
 import threading
 import time
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -25,9 +22,7 @@ import zenoh
 
 from recorder.writer import Recording, RunWriter
 from wire.keys import Keys
-from wire.session import SessionOptions, add_session_args, open_session, options_from_args
-
-CLOSE_TIMEOUT_S = 3.0
+from wire.session import SessionOptions, add_session_args, bounded_session, options_from_args
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:
@@ -44,22 +39,6 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     )
     add_session_args(parser)
     return parser.parse_args(argv)
-
-
-@contextlib.contextmanager
-def bounded_session(opts: SessionOptions) -> Iterator[zenoh.Session]:
-    """A session closed on exit, without letting a stuck close hang the process."""
-    session = open_session(opts)
-    try:
-        yield session
-    finally:
-        closer = threading.Thread(target=session.close, daemon=True)
-        closer.start()
-        closer.join(CLOSE_TIMEOUT_S)
-        if closer.is_alive():
-            print("btrack record: session close timed out", file=sys.stderr)
-            sys.stdout.flush()
-            os._exit(0)
 
 
 def run(out: Path, opts: SessionOptions, drain_s: float = 0.3) -> dict[str, int]:
@@ -84,7 +63,7 @@ def run(out: Path, opts: SessionOptions, drain_s: float = 0.3) -> dict[str, int]
     writer = RunWriter(out / "run.mcap")
     recording = Recording(writer)
     try:
-        with bounded_session(opts) as session:
+        with bounded_session(opts, "btrack record") as session:
             subscriber = session.declare_subscriber(keys.everything(), on_sample)
             alive_sub = session.liveliness().declare_subscriber(
                 keys.alive("*"), on_alive, history=True

@@ -16,16 +16,12 @@ a queue; everything else happens on the main thread.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import logging
-import os
 import queue
 import signal
 import sys
-import threading
 import time
-from collections.abc import Iterator
 from typing import Any
 
 import zenoh
@@ -47,17 +43,15 @@ from wire import (
     encode,
 )
 from wire.session import (
-    SessionOptions,
     add_session_args,
+    bounded_session,
     declare_publisher,
-    open_session,
     options_from_args,
 )
 
 log = logging.getLogger("btrack.world")
 
 INFO_EVERY_TICKS = 100
-CLOSE_TIMEOUT_S = 3.0
 
 # queue items, built on Zenoh threads: (kind, key, payload-or-flag)
 _ALIVE, _RECORDER, _CMD, _STOP = "alive", "recorder", "cmd", "stop"
@@ -134,23 +128,6 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_session_args(p)
     return p
-
-
-@contextlib.contextmanager
-def bounded_session(opts: SessionOptions) -> Iterator[zenoh.Session]:
-    """A session closed on exit, without letting a slow close hang the process."""
-    session = open_session(opts)
-    try:
-        yield session
-    finally:
-        closer = threading.Thread(target=session.close, daemon=True)
-        closer.start()
-        closer.join(CLOSE_TIMEOUT_S)
-        if closer.is_alive():
-            log.warning("session close took over %.0f s; exiting anyway", CLOSE_TIMEOUT_S)
-            sys.stdout.flush()
-            sys.stderr.flush()
-            os._exit(0)
 
 
 class WorldProcess:
@@ -453,7 +430,7 @@ def main(argv: list[str] | None = None) -> int:
     world = World(gmap, args.robots, args.start, args.seed, args.odom_noise, args.team)
     total = round(args.duration / args.dt)
 
-    with bounded_session(options_from_args(args)) as session:
+    with bounded_session(options_from_args(args), "btrack world") as session:
         proc = WorldProcess(args, world, session)
         previous = {
             sig: signal.signal(sig, lambda *_: proc.stop())

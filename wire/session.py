@@ -8,9 +8,12 @@ Precedence, lowest first: zenoh's defaults with peer mode, a JSON5 file
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
-from collections.abc import Mapping
+import sys
+import threading
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 
 import zenoh
@@ -111,6 +114,28 @@ def build_config(opts: SessionOptions, env: Mapping[str, str] | None = None) -> 
 def open_session(opts: SessionOptions) -> zenoh.Session:
     zenoh.try_init_log_from_env()
     return zenoh.open(build_config(opts))
+
+
+CLOSE_TIMEOUT_S = 3.0
+
+
+@contextlib.contextmanager
+def bounded_session(opts: SessionOptions, who: str = "btrack") -> Iterator[zenoh.Session]:
+    """A session closed on exit, without letting a slow close hang the process (it can
+    block for seconds under packet loss): past ``CLOSE_TIMEOUT_S`` the process exits."""
+    session = open_session(opts)
+    try:
+        yield session
+    finally:
+        closer = threading.Thread(target=session.close, daemon=True)
+        closer.start()
+        closer.join(CLOSE_TIMEOUT_S)
+        if closer.is_alive():
+            print(f"{who}: session close took over {CLOSE_TIMEOUT_S:g} s; exiting anyway",
+                  file=sys.stderr)
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(0)
 
 
 def loopback_options(ns: str, hub_port: int, listen: bool = True) -> SessionOptions:
