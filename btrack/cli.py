@@ -23,20 +23,24 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
-def usage() -> str:
-    lines = ["usage: btrack COMMAND [options]   (btrack COMMAND --help for each)", "", "commands:"]
-    lines += [f"  {name:<9} {help_}" for name, (_, help_) in COMMANDS.items()]
-    return "\n".join(lines)
+def dispatch(prog: str, commands: dict[str, tuple[str, str]], argv: list[str]) -> int:
+    """Run ``argv[0]``'s module's ``main`` on the rest, importing only that module;
+    help with no command, a clear error (exit 2) for an unknown one. Also serves the
+    subcommands of ``btrack bridge``."""
+    width = max(map(len, commands)) + 1
+    lines = [f"usage: {prog} COMMAND [options]   ({prog} COMMAND --help for each)", "",
+             "commands:"]
+    lines += [f"  {name:<{width}} {help_}" for name, (_, help_) in commands.items()]
+    usage = "\n".join(lines)
+    if not argv or argv[0] in ("-h", "--help", "help"):
+        print(usage)
+        return 0
+    name, rest = argv[0], argv[1:]
+    if name not in commands:
+        print(f"{prog}: unknown command {name!r}\n\n{usage}", file=sys.stderr)
+        return 2
+    return int(importlib.import_module(commands[name][0]).main(rest) or 0)
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    if not argv or argv[0] in ("-h", "--help", "help"):
-        print(usage())
-        return 0
-    name, rest = argv[0], argv[1:]
-    if name not in COMMANDS:
-        print(f"btrack: unknown command {name!r}\n\n{usage()}", file=sys.stderr)
-        return 2
-    module = importlib.import_module(COMMANDS[name][0])
-    return int(module.main(rest) or 0)
+    return dispatch("btrack", COMMANDS, sys.argv[1:] if argv is None else argv)
