@@ -50,7 +50,9 @@ class ProcessGroup:
     log_dir: Path
     children: list[Child] = field(default_factory=list)
 
-    def start(self, name: str, args: list[str]) -> Child:
+    def start(self, name: str, args: list[str], nice: int = 0) -> Child:
+        """Start ``python -m btrack ARGS``; ``nice`` > 0 lowers its CPU priority (for
+        processes off the critical path, so they yield the cores when they are short)."""
         self.log_dir.mkdir(parents=True, exist_ok=True)
         log_path = self.log_dir / f"{name}.log"
         out_path = self.log_dir / f"{name}.out"
@@ -61,6 +63,11 @@ class ProcessGroup:
                 start_new_session=True,  # Ctrl-C reaches the launcher only; it ends them
                 env={**os.environ, "PYTHONUNBUFFERED": "1"},
             )
+        if nice > 0:
+            try:
+                os.setpriority(os.PRIO_PROCESS, proc.pid, nice)
+            except OSError:
+                pass  # it only costs speed
         child = Child(name, proc, log_path, out_path)
         self.children.append(child)
         # So that whoever started the launcher can end every child by pid, whatever happens.
