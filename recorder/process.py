@@ -1,7 +1,9 @@
 """``btrack record``: subscribe to everything in a run namespace and write DIR/run.mcap.
 
-Zenoh callbacks only stamp the wall clock and push to a queue; the main thread
-drains it through ``recorder.writer.Recording``. The process stops once it has
+Messages wait in a Zenoh FIFO channel that the main thread empties in batches
+through ``recorder.writer.Recording``, stamping each with the wall clock as it is
+taken (no Python callback per message); liveliness changes, rare, come through a
+callback and a queue. The process stops once it has
 written a Tick with ``done=True`` (after a short drain for messages in flight) or
 on SIGTERM/SIGINT, and always leaves a finished, readable MCAP file.
 """
@@ -24,6 +26,10 @@ from recorder.writer import Recording, RunWriter
 from wire.keys import Keys
 from wire.session import SessionOptions, add_session_args, bounded_session, options_from_args
 
+CHANNEL_CAPACITY = 1 << 20  # samples held before Zenoh's thread would wait on us
+BATCH = 2000  # samples written between looks at liveliness and the stop flag
+IDLE_S = 0.002  # sleep when nothing is waiting
+
 
 def parse_args(argv: list[str]) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
@@ -45,7 +51,7 @@ def run(out: Path, opts: SessionOptions, drain_s: float = 0.3) -> dict[str, int]
     """Record until the final tick or a signal; return the summary counts."""
     keys = Keys(opts.ns)
     out.mkdir(parents=True, exist_ok=True)
-    inbox: queue.SimpleQueue[tuple[str, Any, int]] = queue.SimpleQueue()
+    inbox: queue.SimpleQueue[tuple[str, bool, int]] = queue.SimpleQueue()  # liveliness
     stop = threading.Event()
 
     def on_signal(signum: int, frame: Any) -> None:
@@ -54,9 +60,6 @@ def run(out: Path, opts: SessionOptions, drain_s: float = 0.3) -> dict[str, int]
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, on_signal)
 
-    def on_sample(sample: zenoh.Sample) -> None:
-        inbox.put((str(sample.key_expr), sample.payload.to_bytes(), time.time_ns()))
-
     def on_alive(sample: zenoh.Sample) -> None:
         inbox.put((str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT, time.time_ns()))
 
@@ -64,13 +67,17 @@ def run(out: Path, opts: SessionOptions, drain_s: float = 0.3) -> dict[str, int]
     recording = Recording(writer)
     try:
         with bounded_session(opts, "btrack record") as session:
-            subscriber = session.declare_subscriber(keys.everything(), on_sample)
+            # A channel, not a callback: the main thread takes samples in batches with no
+            # Python thread woken per message (the recorder sees every message of a run).
+            subscriber = session.declare_subscriber(
+                keys.everything(), zenoh.handlers.FifoChannel(CHANNEL_CAPACITY)
+            )
             alive_sub = session.liveliness().declare_subscriber(
                 keys.alive("*"), on_alive, history=True
             )
             token = session.liveliness().declare_token(keys.alive_recorder())
             try:
-                _drain_loop(inbox, recording, keys, stop, drain_s)
+                _drain_loop(subscriber, inbox, recording, keys, stop, drain_s)
             finally:
                 token.undeclare()
                 alive_sub.undeclare()
@@ -81,7 +88,8 @@ def run(out: Path, opts: SessionOptions, drain_s: float = 0.3) -> dict[str, int]
 
 
 def _drain_loop(
-    inbox: queue.SimpleQueue[tuple[str, Any, int]],
+    subscriber: zenoh.Subscriber,  # type: ignore[type-arg]
+    inbox: queue.SimpleQueue[tuple[str, bool, int]],
     recording: Recording,
     keys: Keys,
     stop: threading.Event,
@@ -89,22 +97,30 @@ def _drain_loop(
 ) -> None:
     relative: dict[str, str] = {}
     deadline: float | None = None
+    take = subscriber.try_recv
     while not stop.is_set():
         if deadline is None and recording.done:
             deadline = time.monotonic() + drain_s
         if deadline is not None and time.monotonic() >= deadline:
             return
-        try:
-            key, payload, log_ns = inbox.get(timeout=0.05)
-        except queue.Empty:
-            continue
-        topic = relative.get(key)
-        if topic is None:
-            topic = relative[key] = keys.relative(key)
-        if isinstance(payload, bool):
-            recording.handle_alive(topic, payload, log_ns)
-        else:
-            recording.handle(topic, payload, log_ns)
+        while not inbox.empty():
+            key, alive, log_ns = inbox.get_nowait()
+            recording.handle_alive(_topic(relative, keys, key), alive, log_ns)
+        taken = 0
+        while taken < BATCH and (sample := take()) is not None:
+            key = str(sample.key_expr)
+            topic = relative.get(key) or _topic(relative, keys, key)
+            recording.handle(topic, sample.payload.to_bytes(), time.time_ns())
+            taken += 1
+        if not taken:
+            time.sleep(IDLE_S)
+
+
+def _topic(relative: dict[str, str], keys: Keys, key: str) -> str:
+    topic = relative.get(key)
+    if topic is None:
+        topic = relative[key] = keys.relative(key)
+    return topic
 
 
 def main(argv: list[str] | None = None) -> int:
