@@ -266,8 +266,9 @@ class AgentNode:
             upper=-1 if upper_id is None else upper_id,
             edge_lo=sense.edge_lo, edge_hi=sense.edge_hi, dropped=self.dropped,
         )
-        self.pub_state.put(encode(state))
+        # The command first: the world waits for it; neighbours need the state next tick.
         self.pub_cmd.put(encode(Cmd(t=sense.t, k=k, robot=self.robot, v=out.v, omega=out.omega)))
+        self.pub_state.put(encode(state))
         self.last_k = k
         self.ticks += 1
 

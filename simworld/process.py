@@ -251,26 +251,22 @@ class WorldProcess:
             world.move(robot, dx, dy)
             log.warning("tick %d: robot %d carried by (%g, %g) m", k, robot, dx, dy)
         odometry = self.pose_source == "odometry"
-        for i in range(self.n):
-            x, y, th = world.truth(i)
-            self.pub_truth[i].put(encode(Truth(t, k, i, x, y, th)))
-            if self.laser is not None:
-                continue  # the localizer publishes the poses
-            if odometry:
-                px, py, pth = world.odometry_pose(i)
-            else:
-                px, py, pth = x, y, th
-            self.pub_pose[i].put(encode(Pose(t, k, i, px, py, pth, source=self.pose_source)))
-        if self.laser is not None:
+        truth = [world.truth(i) for i in range(self.n)]
+        if self.laser is None:
+            for i in range(self.n):
+                px, py, pth = world.odometry_pose(i) if odometry else truth[i]
+                self.pub_pose[i].put(encode(Pose(t, k, i, px, py, pth, source=self.pose_source)))
+        else:  # the localizer publishes the poses
             s = self.laser.scanner
-            centres = [world.truth(i)[:2] for i in range(self.n)]
-            ranges = self.laser.scan(centres)
+            ranges = self.laser.scan([(x, y) for x, y, _ in truth])
             self.pub_scan.put(encode(Scan(t, k, ranges, s.x, s.y, s.theta, s.angle_min,
                                           s.angle_step, s.range_max)))
         for i in range(self.n):
             r = world.sense(i)
             sense = Sense(t, k, i, r.ice, r.algae, r.odom_dist_m, r.odom_dtheta, lo, hi, dt)
-            self.pub_sense[i].put(encode(sense))  # last: an agent may act on its Sense
+            self.pub_sense[i].put(encode(sense))  # an agent may act on its Sense
+        for i, (x, y, th) in enumerate(truth):  # for the recorder only: after the agents'
+            self.pub_truth[i].put(encode(Truth(t, k, i, x, y, th)))  # inputs
 
     # the clock ---------------------------------------------------------------
     def wait_for_team(self) -> bool:

@@ -87,6 +87,13 @@ def _coerce(name: str, value: Any, hint: Any) -> Any:
     raise DecodeError(f"{name}: unsupported field type {hint}")  # pragma: no cover
 
 
+@cache
+def _plan(cls: Any) -> tuple[tuple[tuple[str, Any], ...], frozenset[str]]:
+    """The fields of ``cls`` with their type hints, in order, and their names."""
+    types = _field_types(cls)
+    return tuple(types.items()), frozenset(types)
+
+
 def decode(cls: type[T], payload: bytes) -> T:
     """Decode and validate ``payload`` as a ``cls`` message, or raise ``DecodeError``."""
     try:
@@ -96,14 +103,27 @@ def decode(cls: type[T], payload: bytes) -> T:
     if not isinstance(raw, dict):
         raise DecodeError(f"expected a map, got {type(raw).__name__}")
     spec: Any = cls  # a dataclass type, hashable for the caches
-    types = _field_types(spec)
-    missing = _required(spec) - raw.keys()
-    if missing:
-        raise DecodeError(f"missing field(s): {', '.join(sorted(missing))}")
-    extra = raw.keys() - types.keys()
-    if extra:
-        raise DecodeError(f"unknown field(s): {', '.join(sorted(map(str, extra)))}")
-    values = {name: _coerce(name, raw[name], types[name]) for name in raw}
+    plan, names = _plan(spec)
+    if raw.keys() != names:  # the common case skips both set differences
+        missing = _required(spec) - raw.keys()
+        if missing:
+            raise DecodeError(f"missing field(s): {', '.join(sorted(missing))}")
+        extra = raw.keys() - names
+        if extra:
+            raise DecodeError(f"unknown field(s): {', '.join(sorted(map(str, extra)))}")
+    values = {}
+    for name, hint in plan:
+        if name not in raw:
+            continue  # an optional field: its default
+        value = raw[name]
+        kind = type(value)
+        # the common cases inline (finite float, plain int); everything else in _coerce
+        if (kind is float and hint is float and value - value == 0.0) or (
+            kind is int and hint is int
+        ):
+            values[name] = value
+        else:
+            values[name] = _coerce(name, value, hint)
     msg = cls(**values)
     try:
         msg.check()  # type: ignore[attr-defined]
