@@ -19,6 +19,9 @@ class ErrorSeries:
     phase_path: np.ndarray  # e_phi with the path-length phase, rad
     workload: np.ndarray  # e_Psi with the true workload (true patrol depth), m^2
     workload_agents: np.ndarray  # e_Psi from the workloads the agents published, m^2
+    # e_phi from the phases the agents published (each from its own pose estimate), rad:
+    # the errors as the robots see them, how the thesis measured its robot runs
+    phase_agents: np.ndarray
 
 
 def time_grid(run: RunData) -> np.ndarray:
@@ -81,6 +84,7 @@ def error_series(run: RunData) -> ErrorSeries:
     phase_path: dict[int, np.ndarray] = {}
     work: dict[int, np.ndarray] = {}
     work_agents: dict[int, np.ndarray] = {}
+    phase_agents: dict[int, np.ndarray] = {}
     for i in ids:
         tr, st = run.truth[i], run.states[i]
         x = m.hold(tr.t, tr.x, t, age)
@@ -97,6 +101,7 @@ def error_series(run: RunData) -> ErrorSeries:
             else np.full(t.shape, np.nan)
         )
         work_agents[i] = m.hold(st.t, st.workload, t, age)
+        phase_agents[i] = m.hold(st.t, st.phase, t, age)
 
     def errors(values: dict[int, np.ndarray], wrap: bool) -> np.ndarray:
         if not pairs:
@@ -110,4 +115,5 @@ def error_series(run: RunData) -> ErrorSeries:
         phase_path=errors(phase_path, True),
         workload=errors(work, False),
         workload_agents=errors(work_agents, False),
+        phase_agents=errors(phase_agents, True),
     )

@@ -51,6 +51,8 @@ KEYS = (
     "faults",
     "loc_error_mean_m",
     "loc_error_p95_m",
+    "phase_sse_agents_rad",
+    "workload_sse_agents_m2",
 )
 
 
@@ -186,6 +188,9 @@ def compute_summary(
         "faults": fault_measures(run, s, gap, workload_band, CONVERGE_SMOOTH_S),
         "loc_error_mean_m": loc_mean,
         "loc_error_p95_m": loc_p95,
+        # as the robots see it: from the phases and workloads they published
+        "phase_sse_agents_rad": m.steady_state(s.t, s.phase_agents)[0],
+        "workload_sse_agents_m2": m.steady_state(s.t, s.workload_agents)[0],
     }
     assert tuple(out) == KEYS
     return json_safe(out)

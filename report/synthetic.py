@@ -26,10 +26,12 @@ def write_synthetic_run(
     settle_s: float = 8.0,
     speedup: float = 100.0,
     garbage: int = 0,
+    phase_bias: tuple[float, ...] = (0.0,),
 ) -> Path:
     """Write ``run_dir``/run.mcap: each robot sweeps its equal segment in ``cycle_s`` with
     a phase offset decaying with time constant ``settle_s``, weaving across y = 0.
-    Wall (log) time runs ``speedup`` times slower than simulation time."""
+    Wall (log) time runs ``speedup`` times slower than simulation time. ``phase_bias``:
+    added to the phase each robot publishes, as if its own pose estimate were off."""
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     edge_lo, edge_hi = edge
@@ -76,7 +78,7 @@ def write_synthetic_run(
                 robot=i,
                 lo=lo,
                 hi=hi,
-                phase=phi,
+                phase=(phi + phase_bias[i % len(phase_bias)]) % TWO_PI,
                 phase_des=phi,
                 workload=0.9 * (hi - lo),
                 depth_avg=0.9,

@@ -74,10 +74,16 @@ def thesis_table(
     return lines
 
 
-def below_thesis(case: Mapping[str, Any]) -> tuple[bool, bool]:
-    """Whether a case's phase and workload steady-state errors are below the thesis's."""
+TRUE_KEYS = ("phase_sse_rad", "workload_sse_m2")  # measured against ground truth
+AGENT_KEYS = ("phase_sse_agents_rad", "workload_sse_agents_m2")  # as the robots see it
+
+
+def below_thesis(case: Mapping[str, Any], keys: tuple[str, str] = TRUE_KEYS
+                 ) -> tuple[bool, bool]:
+    """Whether a case's phase and workload steady-state errors (``keys``: true or as the
+    agents see them) are below the thesis's."""
     out = []
-    for key, table in (("phase_sse_rad", PHASE_SSE_RAD), ("workload_sse_m2", WORKLOAD_SSE_M2)):
+    for key, table in ((keys[0], PHASE_SSE_RAD), (keys[1], WORKLOAD_SSE_M2)):
         ours = case.get(key)
         theirs = thesis_cell(table, str(case.get("map")), str(case.get("start")))
         out.append(isinstance(ours, (int, float)) and math.isfinite(ours) and ours < theirs)

@@ -57,6 +57,21 @@ def test_report_writes_summary_figures_and_markdown(tmp_path: Path) -> None:
     assert summary["revisit_ideal_s"] > 0
 
 
+def test_errors_as_the_agents_see_them_come_from_what_they_published(tmp_path: Path) -> None:
+    # robot 1 publishes a phase 0.2 rad ahead of where it is, and every agent the same
+    # workload (0.9 m deep everywhere, against the map's 1.5 / 0.3 m)
+    write_synthetic_run(tmp_path, duration_s=60.0, phase_bias=(0.0, 0.2, 0.0))
+    done = btrack("report", str(tmp_path))
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["phase_sse_rad"] < 0.01  # truth: the offset has decayed
+    assert summary["phase_sse_agents_rad"] == pytest.approx(0.2, abs=0.01)  # both pairs
+    assert summary["workload_sse_m2"] == pytest.approx(1.2, abs=1e-6)
+    assert summary["workload_sse_agents_m2"] == pytest.approx(0.0, abs=1e-9)
+    text = (tmp_path / "report.md").read_text()
+    assert "as the agents see it" in text
+
+
 def test_make_report_returns_the_summary(tmp_path: Path) -> None:
     from report.cli import make_report
 

@@ -46,9 +46,15 @@ def test_short_suite_writes_tables_summary_and_every_case(tmp_path: Path) -> Non
     assert cases[0]["thesis_workload_sse_m2"] == 0.010
     assert cases[1]["thesis_workload_sse_m2"] == 0.015
 
+    assert doc["below_thesis"] in (0, 1, 2) and doc["below_thesis_agents"] in (0, 1, 2)
+    for c in cases:  # with truth poses the agents' own view is the true one
+        assert abs(c["phase_sse_agents_rad"] - c["phase_sse_rad"]) < 0.05
+
     text = (out / "report.md").read_text()
-    assert "Table 7.1" in text and "Table 7.2" in text
-    for table in text.split("**Table 7.")[1:]:
+    assert "Table 7.1" in text and "Table 7.2" in text and "As the robots see it" in text
+    tables = text.split("**Table 7.")[1:] + text.split("as the agents see it (")[1:]
+    assert len(tables) == 4
+    for table in tables:
         rows = [line for line in table.splitlines() if line.startswith("|")]
         header, rule, *body = rows
         assert header.count("|") == len(START_HEADINGS) + 2
