@@ -1,18 +1,22 @@
 """Speed of a simulated team: simulated time over wall time at 10 Hz control.
 
 Runs `btrack sim` (world, recorder and N agents as separate processes) for each team
-size and prints the world's own tick rate and the speed-up. Usage:
+size, --repeat times, and prints the world's tick rate and speed-up (median, min and
+max over the repeats: a shared 2-core machine varies by +-20 % run to run) and the
+whole command's wall time, start-up and the recorder's catch-up included. Usage:
 
-    .venv/bin/python bench/speed.py [--robots 3 10] [--duration 600]
+    .venv/bin/python bench/speed.py [--robots 3 10] [--duration 600] [--repeat 5]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import statistics
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 
@@ -21,10 +25,12 @@ def main() -> int:
     p.add_argument("--robots", type=int, nargs="+", default=[3])
     p.add_argument("--duration", type=float, default=600.0)
     p.add_argument("--map", default="half-algae")
+    p.add_argument("--repeat", type=int, default=3, help="runs per setting (3)")
     p.add_argument("--localization", nargs="+", default=["truth", "pf"],
                    help="pose sources to measure (default: truth pf)")
     args = p.parse_args()
-    print(f"{'poses':>8} {'robots':>6} {'sim s':>7} {'wall s':>7} {'ticks/s':>8} {'speed-up':>9}")
+    print(f"{'poses':>8} {'robots':>6} {'sim s':>7} {'world s':>8} {'ticks/s':>8} "
+          f"{'speed-up median (min-max)':>27} {'command s':>10}")
     for loc in args.localization:
         run_team_sizes(args, loc)
     return 0
@@ -32,18 +38,27 @@ def main() -> int:
 
 def run_team_sizes(args: argparse.Namespace, loc: str) -> None:
     for n in args.robots:
-        with tempfile.TemporaryDirectory() as tmp:
-            out = Path(tmp) / "run"
-            subprocess.run(
-                [sys.executable, "-m", "btrack", "sim", "--robots", str(n), "--map", args.map,
-                 "--localization", loc, "--duration", str(args.duration), "--out", str(out),
-                 "--quiet", "--no-report"],
-                check=True, stdout=subprocess.DEVNULL,
-            )
-            world = json.loads((out / "logs" / "world.out").read_text().strip().splitlines()[-1])
-            print(f"{loc:>8} {n:>6} {args.duration:>7.0f} {world['wall_s']:>7.2f} "
-                  f"{world['ticks'] / world['wall_s']:>8.0f} {world['speedup']:>8.1f}x",
-                  flush=True)
+        worlds, commands = [], []
+        for _ in range(args.repeat):
+            with tempfile.TemporaryDirectory() as tmp:
+                out = Path(tmp) / "run"
+                began = time.monotonic()
+                subprocess.run(
+                    [sys.executable, "-m", "btrack", "sim", "--robots", str(n), "--map",
+                     args.map, "--localization", loc, "--duration", str(args.duration),
+                     "--out", str(out), "--quiet", "--no-report"],
+                    check=True, stdout=subprocess.DEVNULL,
+                )
+                commands.append(time.monotonic() - began)
+                log = (out / "logs" / "world.out").read_text().strip().splitlines()[-1]
+                worlds.append(json.loads(log))
+        speeds = [w["speedup"] for w in worlds]
+        walls = [w["wall_s"] for w in worlds]
+        wall = statistics.median(walls)
+        ticks = statistics.median(w["ticks"] for w in worlds)
+        print(f"{loc:>8} {n:>6} {args.duration:>7.0f} {wall:>8.2f} {ticks / wall:>8.0f} "
+              f"{statistics.median(speeds):>12.1f}x ({min(speeds):.1f}-{max(speeds):.1f}x) "
+              f"{statistics.median(commands):>10.1f}", flush=True)
 
 
 if __name__ == "__main__":
