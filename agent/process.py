@@ -9,6 +9,7 @@ are counted and dropped; nothing on the bus can kill it.
 from __future__ import annotations
 
 import argparse
+import collections
 import dataclasses
 import json
 import os
@@ -67,7 +68,10 @@ class AgentNode:
         self.team = team
         self.gains, self.patrol_cfg, self.limits = gains, patrol, limits
         self.neighbour_timeout = neighbour_timeout
-        self.events: queue.SimpleQueue[tuple[str, Any]] = queue.SimpleQueue()
+        # Every message in arrival order; a token in ``wake`` for each wake-up wanted.
+        self.inbox: collections.deque[tuple[str, Any]] = collections.deque()
+        self.wake: queue.SimpleQueue[None] = queue.SimpleQueue()
+        self.waiting = False  # a tick has begun (its Sense is here): anything may finish it
         self.live: set[int] = set()
         self.states: dict[int, dict[int, AgentState]] = {}
         self.neighbour_subs: dict[int, Any] = {}
@@ -93,20 +97,33 @@ class AgentNode:
         ]
         self.token = session.liveliness().declare_token(keys.alive(robot))
 
-    # Zenoh callbacks run on Zenoh's threads: they only enqueue.
+    # Zenoh callbacks run on Zenoh's threads: they only enqueue. A Sense begins a tick
+    # and always wakes the loop; a Pose or a neighbour's State wakes it only while a
+    # tick is waiting (otherwise it waits in the inbox for the next Sense): one wake-up
+    # per tick in lockstep instead of one per message. The callback appends before it
+    # reads ``waiting`` and the loop sets ``waiting`` before it looks at the inbox, so
+    # no message is left sleeping while a tick waits for it.
     def _on(self, kind: str) -> Callable[[zenoh.Sample], None]:
+        always = kind == "sense"
+
         def callback(sample: zenoh.Sample) -> None:
-            self.events.put((kind, (str(sample.key_expr), sample.payload.to_bytes())))
+            self.inbox.append((kind, (str(sample.key_expr), sample.payload.to_bytes())))
+            if always or self.waiting:
+                self.wake.put(None)
         return callback
+
+    def _post(self, kind: str, data: Any) -> None:
+        self.inbox.append((kind, data))
+        self.wake.put(None)
 
     def _on_alive(self, sample: zenoh.Sample) -> None:
         rid = Keys.robot_of(str(sample.key_expr))
         if rid is not None:
-            self.events.put(("alive", (rid, sample.kind == zenoh.SampleKind.PUT)))
+            self._post("alive", (rid, sample.kind == zenoh.SampleKind.PUT))
 
     def stop(self) -> None:
         self.stopping = True
-        self.events.put(("stop", None))
+        self._post("stop", None)
 
     def _drop(self, key: str, why: str) -> None:
         self.dropped += 1
@@ -217,20 +234,20 @@ class AgentNode:
 
     def run(self) -> None:
         deadline: float | None = None
+        inbox = self.inbox
         while not self.stopping:
-            timeout = 0.5 if deadline is None else max(0.0, deadline - time.monotonic())
-            try:
-                kind, data = self.events.get(timeout=timeout)
+            self.waiting = any(k > self.last_k for k in self.senses)
+            if not inbox:
+                timeout = 0.5 if deadline is None else max(0.0, deadline - time.monotonic())
+                try:
+                    self.wake.get(timeout=timeout)
+                except queue.Empty:
+                    pass
+            while inbox:  # everything that has arrived, before deciding
+                kind, data = inbox.popleft()
                 if kind == "stop":
-                    break
+                    return
                 self._handle(kind, data)
-                while True:  # drain what is already queued before deciding
-                    kind, data = self.events.get_nowait()
-                    if kind == "stop":
-                        return
-                    self._handle(kind, data)
-            except queue.Empty:
-                pass
             k = self._ready_tick()
             if k is None:
                 # Keep a running neighbour deadline: with hardware, tick k+1's Sense often
