@@ -243,7 +243,8 @@ class HilWorld:
                     last = next_tick
                 done = now >= end
                 self.publish_poses(k)
-                self.pub_tick.put(encode(Tick(k * a.dt, k, sorted(self.live), 0.0, done)))
+                self.pub_tick.put(encode(Tick(k * a.dt, k, sorted(self.live), 0.0, done,
+                                              time.time_ns())))
                 ticks += 1
                 # The next tick on the epoch's grid. A late tick is still published: its
                 # poses are exact (physics stepped to its grid time), only later.

@@ -119,8 +119,9 @@ def fault_measures(run: RunData, series: ErrorSeries, gap: np.ndarray, band: flo
 
 def _wall_delay(run: RunData, fault: dict[str, Any], detected: float) -> float:
     """Wall seconds between the fault (the launcher's clock when it acted, else when
-    the recorder got the news) and the recorder's receipt of the tick at which it was
-    detected. Both clocks are this machine's: simulation only."""
+    the recorder got the news) and the tick at which it was detected (the world's clock
+    when it published it, else the recorder's receipt). Both clocks are this
+    machine's: simulation only."""
     if not math.isfinite(detected) or run.tick_t.size == 0:
         return math.nan
     k = min(int(np.searchsorted(run.tick_t, detected)), run.tick_t.size - 1)

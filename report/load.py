@@ -51,7 +51,7 @@ class States:
 class RunData:
     info: dict[str, Any]  # the last WorldInfo, {} if none was recorded
     tick_t: np.ndarray  # simulation time of each tick
-    tick_log_ns: np.ndarray  # wall clock (ns) at which the recorder received each tick
+    tick_log_ns: np.ndarray  # wall clock (ns) of each tick: the world's, else the recorder's
     tick_live: list[list[int]] = field(default_factory=list)  # the world's live agents
     faults: list[dict[str, Any]] = field(default_factory=list)  # Fault messages, by time
     truth: dict[int, Truth] = field(default_factory=dict)
@@ -104,7 +104,8 @@ def load_run(path: str | Path) -> RunData:
                     continue
                 if topic == "world/tick":
                     msg = json.loads(message.data)
-                    ticks.append((msg["t"], message.log_time))
+                    # the world's own wall clock when it has one, else the recorder's
+                    ticks.append((msg["t"], msg.get("wall_ns") or message.log_time))
                     live.append(sorted(int(r) for r in msg.get("live", [])))
                 elif topic == "fault":
                     msg = json.loads(message.data)

@@ -327,7 +327,8 @@ class WorldProcess:
                 break
             waited_ms = (time.monotonic() - began) * 1000.0
             live = sorted(self.live)
-            self.pub_tick.put(encode(Tick(t, k, live, waited_ms, k == total - 1)))
+            self.pub_tick.put(encode(Tick(t, k, live, waited_ms, k == total - 1,
+                                          time.time_ns())))
             world.step({i: c for i, c in cmds.items() if i in self.live}, dt)
             k += 1
         return k
@@ -363,7 +364,8 @@ class WorldProcess:
                 if i in self.live and now - seen <= self.args.cmd_timeout
             }
             waited_ms = (now - began) * 1000.0
-            self.pub_tick.put(encode(Tick(t, k, sorted(self.live), waited_ms, k == total - 1)))
+            self.pub_tick.put(encode(Tick(t, k, sorted(self.live), waited_ms, k == total - 1,
+                                          time.time_ns())))
             world.step(cmds, dt)
             k += 1
         return k

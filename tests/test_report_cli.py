@@ -10,8 +10,13 @@ from pathlib import Path
 
 import pytest
 
+from recorder.writer import Recording, RunWriter
+from report.load import load_run
+from report.measures import speedup
 from report.summary import KEYS
 from report.synthetic import write_synthetic_run
+from wire.codec import encode
+from wire.messages import Tick
 
 PNG = b"\x89PNG\r\n\x1a\n"
 ROOT = Path(__file__).resolve().parents[1]
@@ -70,6 +75,19 @@ def test_errors_as_the_agents_see_them_come_from_what_they_published(tmp_path: P
     assert summary["workload_sse_agents_m2"] == pytest.approx(0.0, abs=1e-9)
     text = (tmp_path / "report.md").read_text()
     assert "as the agents see it" in text
+
+
+def test_wall_time_is_the_worlds_clock_when_the_ticks_carry_it(tmp_path: Path) -> None:
+    # a recorder that took the ticks late and in a burst (log times 1 ms apart) must not
+    # change the speed: the world stamped them 10 ms apart, 10x real time at 10 Hz
+    writer = RunWriter(tmp_path / "run.mcap")
+    rec = Recording(writer)
+    for k in range(101):
+        tick = Tick(t=k * 0.1, k=k, live=[0], done=k == 100, wall_ns=10**18 + k * 10**7)
+        rec.handle("world/tick", encode(tick), 2 * 10**18 + k * 10**6)
+    writer.close()
+    run = load_run(tmp_path / "run.mcap")
+    assert speedup(run.tick_t, run.tick_log_ns) == pytest.approx(10.0)
 
 
 def test_make_report_returns_the_summary(tmp_path: Path) -> None:

@@ -160,9 +160,13 @@ class Tick:
     live: list[int]
     waited_ms: float = 0.0  # wall time spent waiting for commands
     done: bool = False  # the last tick of the run
+    # the world's wall clock (ns since the epoch) when it published the tick; 0 if not
+    # given. Speed and wall-time delays are measured on it, not on when a (possibly
+    # lagging) recorder took the message.
+    wall_ns: int = 0
 
     def check(self) -> None:
-        _require(self.t >= 0 and self.k >= 0, "negative t or k")
+        _require(self.t >= 0 and self.k >= 0 and self.wall_ns >= 0, "negative t, k or wall_ns")
 
 
 @dataclass(frozen=True)
