@@ -1,10 +1,14 @@
 """The lawnmower patrol of thesis chapter 6 as a state machine, and the robot's
 depth map from which its workload is measured.
 
-Five motions: (1) ENTER: forward until the upward sensor sees the ice edge;
+Five motions: (1) ENTER: forward until the upward sensor sees the ice edge (at most
+``max_search_m``: a robot whose pose has drifted off the ice's end or side would
+otherwise drive on for ever; it turns back to where it began and goes on with the
+sweep, recording nothing);
 (2) UNDER: on under the ice while algae is seen, at least ``min_depth_m``;
 (3) TURN_UNDER: a 180 degree arc; (4) EXIT: back out until ``margin_out_m`` past
-the edge; (5) TURN_OUT: another 180 degree arc. Each arc moves the robot one pass
+the edge (if the ice never ends, after ``max_depth_m`` plus ``max_search_m``);
+(5) TURN_OUT: another 180 degree arc. Each arc moves the robot one pass
 along the edge, towards ``hi`` or ``lo``; the direction reverses when the next pass
 would leave the segment. Every robot makes the same number of passes per sweep
 (the pass spacing scales with its segment), so robots with equal work step their
@@ -38,6 +42,7 @@ class PatrolConfig:
     min_depth_m: float = 0.3
     margin_out_m: float = 0.3
     max_depth_m: float = 5.0  # turn back regardless, in case a sensor fails
+    max_search_m: float = 2.0  # how far in to look for the edge before giving up
     passes_per_sweep: int = 16
     min_turn_radius_m: float = 0.04
     max_turn_radius_m: float = 0.2
@@ -52,8 +57,9 @@ class PatrolConfig:
             raise ValueError("passes_per_sweep must be at least 1")
         if not 0 < self.min_turn_radius_m <= self.max_turn_radius_m:
             raise ValueError("need 0 < min_turn_radius_m <= max_turn_radius_m")
-        if self.min_depth_m <= 0 or self.margin_out_m <= 0 or self.bin_m <= 0:
-            raise ValueError("depths, margin and bin must be positive")
+        if (self.min_depth_m <= 0 or self.margin_out_m <= 0 or self.bin_m <= 0
+                or self.max_search_m <= 0):
+            raise ValueError("depths, margin, search distance and bin must be positive")
 
 
 @dataclass
@@ -133,6 +139,9 @@ class Patrol:
         self.direction = 1 if direction >= 0 else -1
         self.line_x = x  # the pass line the straight legs hold
         self.entry_y: float | None = None  # where the ice edge was seen on the way in
+        self.leg_y: float | None = None  # where the current straight leg began
+        self.missed = False  # this pass's way in found no edge: nothing to measure
+        self.return_y: float | None = None  # where a pass that missed the edge goes back to
         self.exit_y: float | None = None  # where it was left on the way out
         self.turn_sign = 0  # +1 left (counter-clockwise), -1 right
         self.turn_radius = config.max_turn_radius_m
@@ -252,12 +261,24 @@ class Patrol:
         rotation = 0.0 if self.prev_theta is None else wrap_pi(theta - self.prev_theta)
         self.prev_theta = theta
         prev_y, self.prev_y = self.prev_y, y
+        if self.motion in (Motion.ENTER, Motion.EXIT) and self.leg_y is None:
+            self.leg_y = y
         if self.motion is Motion.ENTER:
             if ice:
                 # The edge lies between this tick and the last one: take the middle.
                 self.entry_y = y if prev_y is None else 0.5 * (prev_y + y)
                 self.algae_depth = None
+                self.missed = False
+                self.return_y = None
                 self.motion = Motion.UNDER
+            elif self.leg_y is not None and y - self.leg_y >= c.max_search_m:
+                # No edge where this pose says it should be: back to where the leg
+                # began (EXIT ends margin_out_m past exit_y), then the next pass line.
+                self.missed = True
+                if self.return_y is None:  # the first of a run of misses: no creeping in
+                    self.return_y = self.leg_y
+                self._start_turn(lo, hi, heading_in=True)
+                self.motion = Motion.TURN_UNDER
         if self.motion is Motion.UNDER:
             depth = y - (self.entry_y if self.entry_y is not None else y)
             if algae:
@@ -268,13 +289,22 @@ class Patrol:
                 self._start_turn(lo, hi, heading_in=True)
                 self.motion = Motion.TURN_UNDER
         elif self.motion is Motion.EXIT:
-            self._measure_on_the_way_out(x, y, prev_y, ice, algae)
+            if self.missed:
+                if self.exit_y is None:
+                    back = self.return_y if self.return_y is not None else y
+                    self.exit_y = back + c.margin_out_m
+            else:
+                self._measure_on_the_way_out(x, y, prev_y, ice, algae)
+            far = self.leg_y is not None and self.leg_y - y >= c.max_depth_m + c.max_search_m
+            if far and self.exit_y is None:  # the ice never ended: a sensor or the pose
+                self.exit_y = y + c.margin_out_m  # is wrong; turn back out here
             if self.exit_y is not None and y <= self.exit_y - c.margin_out_m:
                 self._start_turn(lo, hi, heading_in=False)
                 self.motion = Motion.TURN_OUT
         if self.motion in (Motion.TURN_UNDER, Motion.TURN_OUT):
             self.turned += self.turn_sign * rotation
             if self.turned >= math.pi - 0.03:
+                self.leg_y = None  # a straight leg begins
                 if self.motion is Motion.TURN_UNDER:
                     self.motion = Motion.EXIT
                     self.exit_y = None

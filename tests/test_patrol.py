@@ -81,6 +81,51 @@ def test_sweep_reverses_inside_the_segment_and_reaches_its_end():
     assert patrol.sweeps >= 2
 
 
+def unicycle(patrol: Patrol, sensed, x: float, y: float, steps: int, v: float = 0.05):
+    """Drive the patrol's steering with unit speed steps of ``v`` m; ``sensed(x, y)``
+    gives (ice, algae). Returns the track as (x, y, motion) per step."""
+    theta, track = math.pi / 2, []
+    for _ in range(steps):
+        ice, algae = sensed(x, y)
+        steer = patrol.step(x, y, theta, ice, algae, 0.0, 2.0)
+        theta += steer.curvature * v
+        x += v * math.cos(theta)
+        y += v * math.sin(theta)
+        track.append((x, y, steer.motion))
+    return track
+
+
+def test_a_pass_that_never_finds_the_edge_turns_back_and_moves_on():
+    # a robot whose pose says it is on its segment but that is really off the ice's
+    # end: no ice anywhere. It must not drive on for ever, nor record a depth.
+    cfg = PatrolConfig(passes_per_sweep=8)
+    dm = DepthMap(0.0, 0.1, cfg.min_depth_m)
+    patrol = Patrol(cfg, dm, x=1.0)
+    track = unicycle(patrol, lambda x, y: (False, False), 1.0, -1.0, 600)
+    ys = [y for _, y, _ in track]
+    assert max(ys) < -1.0 + cfg.max_search_m + 2 * cfg.max_turn_radius_m + 0.1
+    assert min(ys) > -1.0 - 2 * cfg.max_turn_radius_m - 0.1  # back to where it began
+    motions = [mo for *_, mo in track]
+    assert motions.count(Motion.UNDER) == 0 and Motion.TURN_OUT in motions
+    # several passes, each on a new pass line (x where each way in begins)
+    starts = [round(x, 1) for (x, _, mo), (_, _, before) in
+              zip(track[1:], track, strict=False) if mo is Motion.ENTER
+              and before is not Motion.ENTER]
+    assert len(starts) >= 3 and len(set(starts)) == len(starts)
+    assert dm.depths == DepthMap(0.0, 0.1, cfg.min_depth_m).depths  # nothing recorded
+
+
+def test_ice_that_never_ends_on_the_way_out_still_ends_the_leg():
+    # under the ice everywhere past y = 0 (the edge is found, but going out the ice
+    # never ends, as if the pose had drifted): the way out is bounded too
+    cfg = PatrolConfig()
+    patrol = Patrol(cfg, DepthMap(0.0, 0.1, cfg.min_depth_m), x=1.0)
+    track = unicycle(patrol, lambda x, y: (y >= 0.0 or y < -1.5, False), 1.0, -1.0, 900)
+    ys = [y for _, y, _ in track]
+    assert min(ys) > -(cfg.max_depth_m + cfg.max_search_m) - 0.5
+    assert [mo for *_, mo in track].count(Motion.TURN_OUT) >= 1
+
+
 def closed_loop(map_name: str, start: str, seconds: float):
     """The control cores of a team around the pure simulator, neighbours' states one
     tick old, exactly as the processes exchange them."""
