@@ -283,9 +283,13 @@ class AgentNode:
             upper=-1 if upper_id is None else upper_id,
             edge_lo=sense.edge_lo, edge_hi=sense.edge_hi, dropped=self.dropped,
         )
-        # The command first: the world waits for it; neighbours need the state next tick.
-        self.pub_cmd.put(encode(Cmd(t=sense.t, k=k, robot=self.robot, v=out.v, omega=out.omega)))
+        # The state before the command: the world cannot step (and start tick k+1) until
+        # every command is in, so each neighbour's state of tick k is always out before
+        # anyone acts on k+1, however loaded the machine; the run stays deterministic.
+        # (Command first was a few per cent faster, but under load a neighbour's state
+        # could come after the neighbour timeout, and the run then depended on timing.)
         self.pub_state.put(encode(state))
+        self.pub_cmd.put(encode(Cmd(t=sense.t, k=k, robot=self.robot, v=out.v, omega=out.omega)))
         self.last_k = k
         self.ticks += 1
 
