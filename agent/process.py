@@ -219,6 +219,15 @@ class AgentNode:
                 return False
         return True
 
+    def _team_heard(self) -> bool:
+        """At tick 0 (a team starting together): whether the neighbours this robot starts
+        with are alive to us, so that it follows them from its first tick. The world
+        starts once it sees every token; each agent may see its neighbours' a little
+        later, and one that had not would treat them as newcomers it need not wait for,
+        and the run would depend on timing."""
+        expected = {r for r in (self.robot - 1, self.robot + 1) if 0 <= r < self.team}
+        return expected <= self.live
+
     def _prune(self, by_tick: dict[int, Any]) -> None:
         for old in [k for k in by_tick if k <= self.last_k or k < max(by_tick) - HISTORY]:
             del by_tick[old]
@@ -253,7 +262,8 @@ class AgentNode:
                 # Keep a running neighbour deadline: with hardware, tick k+1's Sense often
                 # comes before tick k's Pose, and resetting here would wait forever.
                 continue
-            if k > 0 and not self._neighbours_ready(k):
+            ready = self._neighbours_ready(k) if k > 0 else self._team_heard()
+            if not ready:
                 if deadline is None:
                     deadline = time.monotonic() + self.neighbour_timeout
                 if time.monotonic() < deadline:
