@@ -122,6 +122,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="wall seconds to wait for all agents before tick 0 (60)",
     )
     p.add_argument(
+        "--settle",
+        type=float,
+        default=0.5,
+        help="wall seconds between seeing the whole team and tick 0, so that each "
+        "agent's subscription to its neighbours' states reaches them before they "
+        "publish their first (0.5)",
+    )
+    p.add_argument(
         "--wait-recorder",
         action="store_true",
         help="also wait for the recorder's liveliness token before tick 0",
@@ -395,8 +403,8 @@ def _check_args(args: argparse.Namespace) -> str | None:
         return "--team must be between 1 and --robots"
     if not args.dt > 0 or not args.duration > 0:
         return "--dt and --duration must be positive"
-    if args.odom_noise < 0 or args.cmd_timeout < 0 or args.startup_timeout < 0:
-        return "--odom-noise, --cmd-timeout and --startup-timeout must be >= 0"
+    if min(args.odom_noise, args.cmd_timeout, args.startup_timeout, args.settle) < 0:
+        return "--odom-noise, --cmd-timeout, --startup-timeout and --settle must be >= 0"
     if args.laser_noise < 0:
         return "--laser-noise must be >= 0"
     try:
@@ -437,6 +445,10 @@ def main(argv: list[str] | None = None) -> int:
         try:
             if not proc.wait_for_team():
                 return 0 if proc.stopping else 1
+            # Without it, a state of tick 0 could be published before a neighbour's
+            # subscription had reached its publisher: lost, and that neighbour's tick 1
+            # would act on nothing, a run that depends on timing.
+            time.sleep(args.settle)
             proc.publish_info()
             began = time.monotonic()
             run = proc.run_realtime if args.realtime else proc.run_lockstep
