@@ -140,8 +140,9 @@ class Patrol:
         self.line_x = x  # the pass line the straight legs hold
         self.entry_y: float | None = None  # where the ice edge was seen on the way in
         self.leg_y: float | None = None  # where the current straight leg began
-        self.missed = False  # this pass's way in found no edge: nothing to measure
-        self.return_y: float | None = None  # where a pass that missed the edge goes back to
+        # Set while passes find no edge (nothing to measure): where the first of them
+        # began, which each way out returns to.
+        self.return_y: float | None = None
         self.exit_y: float | None = None  # where it was left on the way out
         self.turn_sign = 0  # +1 left (counter-clockwise), -1 right
         self.turn_radius = config.max_turn_radius_m
@@ -268,13 +269,11 @@ class Patrol:
                 # The edge lies between this tick and the last one: take the middle.
                 self.entry_y = y if prev_y is None else 0.5 * (prev_y + y)
                 self.algae_depth = None
-                self.missed = False
                 self.return_y = None
                 self.motion = Motion.UNDER
             elif self.leg_y is not None and y - self.leg_y >= c.max_search_m:
                 # No edge where this pose says it should be: back to where the leg
                 # began (EXIT ends margin_out_m past exit_y), then the next pass line.
-                self.missed = True
                 if self.return_y is None:  # the first of a run of misses: no creeping in
                     self.return_y = self.leg_y
                 self._start_turn(lo, hi, heading_in=True)
@@ -289,10 +288,9 @@ class Patrol:
                 self._start_turn(lo, hi, heading_in=True)
                 self.motion = Motion.TURN_UNDER
         elif self.motion is Motion.EXIT:
-            if self.missed:
+            if self.return_y is not None:  # this pass missed the edge
                 if self.exit_y is None:
-                    back = self.return_y if self.return_y is not None else y
-                    self.exit_y = back + c.margin_out_m
+                    self.exit_y = self.return_y + c.margin_out_m
             else:
                 self._measure_on_the_way_out(x, y, prev_y, ice, algae)
             far = self.leg_y is not None and self.leg_y - y >= c.max_depth_m + c.max_search_m

@@ -109,8 +109,8 @@ def _drain_loop(
         taken = 0
         while taken < BATCH and (sample := take()) is not None:
             key = str(sample.key_expr)
-            topic = relative.get(key) or _topic(relative, keys, key)
-            recording.handle(topic, sample.payload.to_bytes(), time.time_ns())
+            recording.handle(_topic(relative, keys, key), sample.payload.to_bytes(),
+                             time.time_ns())
             taken += 1
         if not taken:
             time.sleep(IDLE_S)
