@@ -89,8 +89,8 @@ def fault_measures(run: RunData, series: ErrorSeries, gap: np.ndarray, band: flo
     wall time, which is what a lease costs when the simulation is lockstep),
     coverage_gap_m_s (edge owned by no live agent, integrated from the fault to the
     next one), rebalanced_s (how long after the fault the worst workload error over
-    neighbour pairs, averaged over ``smooth_s``, was back under ``band`` to stay, up
-    to the next fault)."""
+    neighbour pairs, averaged over ``smooth_s``, was first back under ``band`` once the
+    fault had pushed it out, before the next fault)."""
     t = series.t
     out = []
     faults = run.faults
@@ -103,7 +103,7 @@ def fault_measures(run: RunData, series: ErrorSeries, gap: np.ndarray, band: flo
         tw = t[window]
         gap_ms = float(np.sum(np.nan_to_num(gap[window])[:-1] * np.diff(tw))) if tw.size > 1 \
             else 0.0
-        rebalanced = m.converge_time(tw, series.workload[:, window], band, smooth_s)
+        rebalanced = m.recovery_time(tw, series.workload[:, window], band, smooth_s)
         out.append({
             "kind": f["kind"],
             "agent": int(f["agent"]),

@@ -224,6 +224,24 @@ def converge_time(t: np.ndarray, errors: np.ndarray, band: float, smooth_s: floa
     return float(t[after[0]] - t[0]) if after.size else math.nan
 
 
+def recovery_time(t: np.ndarray, errors: np.ndarray, band: float, smooth_s: float = 0.0
+                  ) -> float:
+    """Time (from the first sample) at which max-over-pairs |e|, averaged over the
+    trailing ``smooth_s`` seconds, first came back within ``band`` after having left
+    it; 0 if it never left; NaN if it never came back. Unlike ``converge_time``, a later
+    excursion does not undo the recovery: that belongs to the steady-state measures."""
+    t = np.asarray(t, dtype=float)
+    worst = running_mean(t, max_over_pairs(errors), smooth_s)
+    known = np.flatnonzero(np.isfinite(worst))
+    if t.size == 0 or known.size == 0:
+        return math.nan
+    outside = known[worst[known] > band]
+    if outside.size == 0:
+        return float(t[known[0]] - t[0])
+    back = known[(known > outside[0]) & (worst[known] <= band)]
+    return float(t[back[0]] - t[0]) if back.size else math.nan
+
+
 def crossings(t: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Times and x positions where a track crosses the edge line y = 0 (interpolated)."""
     t, x, y = (np.asarray(v, dtype=float) for v in (t, x, y))

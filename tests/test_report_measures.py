@@ -125,6 +125,18 @@ def test_converge_time() -> None:
     assert m.converge_time(t, e * 0.0, 0.15) == 0.0
 
 
+def test_recovery_time_is_the_first_return_after_leaving_the_band() -> None:
+    t = np.arange(0.0, 100.0, 0.1)
+    # in band, pushed out at 10 s, decays back, then a later excursion at 60-70 s
+    e = np.where(t < 10.0, 0.01, 0.5 * np.exp(-(t - 10.0) / 5.0))
+    e = np.where((t >= 60.0) & (t < 70.0), 0.1, e)
+    expected = 10.0 + 5.0 * math.log(0.5 / 0.05)
+    assert m.recovery_time(t, e[None, :], 0.05) == pytest.approx(expected, abs=0.11)
+    assert math.isnan(m.converge_time(t[t < 65.0], e[None, t < 65.0], 0.05))
+    assert m.recovery_time(t, np.full((2, t.size), 0.01), 0.05) == 0.0
+    assert math.isnan(m.recovery_time(t, np.where(t < 10.0, 0.01, 1.0)[None, :], 0.05))
+
+
 def test_path_length_phase_cycles() -> None:
     # back and forth along x over [0, 1] at 0.1 m per sample: 20 samples per cycle
     x = np.concatenate(
