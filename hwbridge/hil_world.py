@@ -138,7 +138,7 @@ class HilWorld:
         self.stopping = False
         self.dropped = 0
         put = self.events.put
-        self.pub_truth = [declare_publisher(session, keys.truth(i)) for i in range(self.n)]
+        self.pub_truth = declare_publisher(session, keys.truth())
         self.pub_pose = [declare_publisher(session, keys.pose(i)) for i in range(self.n)]
         self.pub_tick = declare_publisher(session, keys.world_tick())
         self.pub_info = declare_publisher(session, keys.world_info())
@@ -211,8 +211,9 @@ class HilWorld:
         t = k * self.args.dt
         with self.lock:
             poses = [self.world.truth(i) for i in range(self.n)]
+        xs, ys, ths = (list(c) for c in zip(*poses, strict=True))
+        self.pub_truth.put(encode(Truth(t, k, list(range(self.n)), xs, ys, ths)))
         for i, (x, y, th) in enumerate(poses):
-            self.pub_truth[i].put(encode(Truth(t, k, i, x, y, th)))
             self.pub_pose[i].put(encode(Pose(t, k, i, x, y, th)))
 
     def respond(self) -> None:

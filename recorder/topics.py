@@ -17,11 +17,11 @@ _ROBOT_TOPICS: dict[tuple[str, str], type] = {
     ("robot", "sense"): messages.Sense,
     ("robot", "pose"): messages.Pose,
     ("robot", "cmd"): messages.Cmd,
-    ("robot", "truth"): messages.Truth,
     ("agent", "state"): messages.AgentState,
 }
 _FIXED_TOPICS: dict[str, type] = {
     "world/tick": messages.Tick,
+    "world/truth": messages.Truth,
     "world/info": messages.WorldInfo,
     "fault": messages.Fault,
     "laser/scan": messages.Scan,

@@ -110,7 +110,13 @@ def load_run(path: str | Path) -> RunData:
                 elif topic == "fault":
                     msg = json.loads(message.data)
                     faults.append({**msg, "log_ns": message.log_time})
-                elif topic.endswith("/truth"):
+                elif topic == "world/truth":  # every robot's, one message per tick
+                    msg = json.loads(message.data)
+                    t = msg["t"]
+                    for r, x, y, th in zip(msg["robots"], msg["x"], msg["y"], msg["theta"],
+                                           strict=True):
+                        truth[int(r)].append((t, x, y, th))
+                elif topic.endswith("/truth"):  # recordings made before 2026-11-23: per robot
                     msg = json.loads(message.data)
                     truth[int(msg["robot"])].append((msg["t"], msg["x"], msg["y"], msg["theta"]))
                 elif topic.endswith("/state") and topic.startswith("agent/"):

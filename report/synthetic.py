@@ -63,6 +63,8 @@ def write_synthetic_run(
     for k in range(steps + 1):
         t = k * dt
         log_ns = wall0 + int(t / speedup * 1e9)
+        xs: list[float] = []
+        ys: list[float] = []
         for i in range(robots):
             lo, hi = float(bounds[i]), float(bounds[i + 1])
             offset = phase_offsets[i % len(phase_offsets)] * math.exp(-t / settle_s)
@@ -71,7 +73,8 @@ def write_synthetic_run(
             frac = phi / math.pi if going_up else 2.0 - phi / math.pi
             x = lo + (hi - lo) * frac
             y = -0.3 + 0.8 * (0.5 - 0.5 * math.cos(TWO_PI * t / 2.0))
-            rec.handle(f"robot/{i}/truth", encode(Truth(t, k, i, x, y, 0.0)), log_ns)
+            xs.append(x)
+            ys.append(y)
             state = AgentState(
                 t=t,
                 k=k,
@@ -89,6 +92,8 @@ def write_synthetic_run(
                 edge_hi=edge_hi,
             )
             rec.handle(f"agent/{i}/state", encode(state), log_ns)
+        rec.handle("world/truth", encode(Truth(t, k, list(range(robots)), xs, ys,
+                                               [0.0] * robots)), log_ns)
         if k < garbage:
             rec.handle("agent/0/state", b"\xc1 not msgpack", log_ns)
         tick = Tick(t=t, k=k, live=list(range(robots)), done=k == steps)

@@ -1,10 +1,10 @@
 """``btrack world``: the simulator process, the run's clock (DESIGN.md "Time").
 
-Lockstep (default): tick k publishes every robot's Truth and Pose, the laser Scan, and
-every robot's Sense (Sense last), waits for tick k's Cmd from every live agent (a dead
-agent is not waited for, a silent one at most ``--cmd-timeout``), publishes the Tick
-and steps the world. ``--realtime`` paces ticks on the wall clock instead and uses each
-robot's latest command.
+Lockstep (default): tick k publishes every robot's Pose, the laser Scan, every
+robot's Sense and then the team's Truth (one message, for the recorder), waits for
+tick k's Cmd from every live agent (a dead agent is not waited for, a silent one at
+most ``--cmd-timeout``), publishes the Tick and steps the world. ``--realtime`` paces
+ticks on the wall clock instead and uses each robot's latest command.
 With ``--localization pf`` the world publishes no Pose: the localizer turns tick k's
 Scan and Sense into tick k's poses, the agents act on them, and the world, which
 waited for the localizer's liveliness before tick 0, waits for their commands as
@@ -170,7 +170,7 @@ class WorldProcess:
         def pub(key: str) -> zenoh.Publisher:
             return declare_publisher(session, key)
 
-        self.pub_truth = [pub(k.truth(i)) for i in range(self.n)]
+        self.pub_truth = pub(k.truth())
         self.pub_pose = [pub(k.pose(i)) for i in range(self.n)]
         self.pub_sense = [pub(k.sense(i)) for i in range(self.n)]
         self.pub_scan = pub(k.scan())
@@ -273,8 +273,9 @@ class WorldProcess:
             r = world.sense(i)
             sense = Sense(t, k, i, r.ice, r.algae, r.odom_dist_m, r.odom_dtheta, lo, hi, dt)
             self.pub_sense[i].put(encode(sense))  # an agent may act on its Sense
-        for i, (x, y, th) in enumerate(truth):  # for the recorder only: after the agents'
-            self.pub_truth[i].put(encode(Truth(t, k, i, x, y, th)))  # inputs
+        # for the recorder only, after the agents' inputs; one message for the team
+        xs, ys, ths = (list(c) for c in zip(*truth, strict=True))
+        self.pub_truth.put(encode(Truth(t, k, list(range(self.n)), xs, ys, ths)))
 
     # the clock ---------------------------------------------------------------
     def wait_for_team(self) -> bool:

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from wire import AgentState, Cmd, DecodeError, Keys, Sense, decode, encode
+from wire import AgentState, Cmd, DecodeError, Keys, Sense, Truth, decode, encode
 
 finite = st.floats(allow_nan=False, allow_infinity=False, min_value=-1e6, max_value=1e6)
 
@@ -54,6 +54,19 @@ def test_ints_accepted_for_floats():
 def test_bad_payloads_refused_with_reason(payload, reason):
     with pytest.raises(DecodeError, match=reason):
         decode(AgentState, payload)
+
+
+def test_team_truth_round_trip_and_shape_checked():
+    msg = Truth(0.5, 5, [0, 1, 2], [0.5, 2.5, 4.5], [-1.0, -1.0, 0.2], [0.0, 1.5, -3.0])
+    assert decode(Truth, encode(msg)) == msg
+    short = msgpack.packb({**msg.__dict__, "y": [-1.0, -1.0]})
+    with pytest.raises(DecodeError, match="one entry per robot"):
+        decode(Truth, short)
+    twice = msgpack.packb({**msg.__dict__, "robots": [0, 1, 1]})
+    with pytest.raises(DecodeError, match="distinct"):
+        decode(Truth, twice)
+    with pytest.raises(DecodeError, match="not finite"):
+        decode(Truth, msgpack.packb({**msg.__dict__, "x": [0.5, math.nan, 4.5]}))
 
 
 @given(st.binary(max_size=200))

@@ -117,7 +117,7 @@ def test_recorder_records_and_stops_on_final_tick(tmp_path: Path) -> None:
             )
             session.put(keys.world_info(), encode(info))
             for k in range(3):
-                session.put(keys.truth(0), encode(Truth(k * 0.1, k, 0, 1.0, -1.0, 0.0)))
+                session.put(keys.truth(), encode(Truth(k * 0.1, k, [0], [1.0], [-1.0], [0.0])))
                 session.put(keys.state(0), encode(state(k)))
                 session.put(keys.world_tick(), encode(Tick(k * 0.1, k, [0])))
             session.put(keys.state(0), b"\x93\x01\x02")  # a msgpack list, not a state
@@ -128,7 +128,9 @@ def test_recorder_records_and_stops_on_final_tick(tmp_path: Path) -> None:
         assert json.loads(out.decode().strip().splitlines()[-1]) == {"messages": 12, "invalid": 1}
         counts, data = read_topics(tmp_path / "run.mcap")
         assert counts["world/info"] == 1
-        assert counts["robot/0/truth"] == 3
+        assert counts["world/truth"] == 3
+        assert data["world/truth"][1] == {"t": 0.1, "k": 1, "robots": [0], "x": [1.0],
+                                          "y": [-1.0], "theta": [0.0]}
         assert counts["agent/0/state"] == 3
         assert counts["world/tick"] == 4
         assert counts["invalid/agent/0/state"] == 1

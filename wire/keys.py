@@ -36,9 +36,9 @@ class Keys:
     def scan(self) -> str:
         return f"{self.ns}/laser/scan"
 
-    # world -> recorder only: ground truth
-    def truth(self, robot: int | str) -> str:
-        return f"{self.ns}/robot/{robot}/truth"
+    # world -> recorder only: every robot's ground truth, one message per tick
+    def truth(self) -> str:
+        return f"{self.ns}/world/truth"
 
     # agent i -> its neighbours (and the recorder)
     def state(self, robot: int | str) -> str:

@@ -91,17 +91,23 @@ class Scan:
 
 @dataclass(frozen=True)
 class Truth:
-    """Ground truth pose of a simulated robot (world -> recorder only)."""
+    """Ground truth poses of every simulated robot at tick ``k``, one message per tick
+    (world -> recorder only): ``robots[j]`` is at (``x[j]``, ``y[j]``, ``theta[j]``)."""
 
     t: float
     k: int
-    robot: int
-    x: float
-    y: float
-    theta: float
+    robots: list[int]
+    x: list[float]
+    y: list[float]
+    theta: list[float]
 
     def check(self) -> None:
-        _require(self.t >= 0 and self.k >= 0 and self.robot >= 0, "negative t, k or robot")
+        _require(self.t >= 0 and self.k >= 0, "negative t or k")
+        n = len(self.robots)
+        _require(len(self.x) == n and len(self.y) == n and len(self.theta) == n,
+                 "robots, x, y and theta: one entry per robot")
+        _require(all(r >= 0 for r in self.robots) and len(set(self.robots)) == n,
+                 "robot ids: distinct and non-negative")
 
 
 @dataclass(frozen=True)
