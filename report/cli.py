@@ -58,6 +58,19 @@ def _fmt(value: Any) -> str:
     return str(value)
 
 
+def _positions_note(source: Any) -> list[str]:
+    """A warning paragraph when the measures could not use the simulator's truth."""
+    if source == "poses":
+        return ["**No ground truth in this recording** (a hardware run): positions, "
+                "position-based errors, tracks and revisit times come from the poses the "
+                "agents were given (the localizer's), so they are only as good as those "
+                "poses.", ""]
+    if source == "none":
+        return ["**No positions in this recording**: only the agents' own view is "
+                "measured.", ""]
+    return []
+
+
 def report_markdown(
     summary: dict[str, Any],
     phase_band: float,
@@ -87,6 +100,7 @@ def report_markdown(
         "phases and workloads the agents published, each from its own pose estimate "
         "(how the thesis measured its robot runs, table 7.3).",
         "",
+        *_positions_note(summary.get("positions_from")),
         "![errors](errors.png)",
         "",
         "![boundaries](boundaries.png)",

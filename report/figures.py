@@ -84,13 +84,13 @@ def map_figure(run: RunData, path: str | Path) -> None:
     """Top-down map: water (y < 0), ice, the algae band and patrol depth, robot tracks."""
     info = run.info
     fig, ax = plt.subplots(figsize=(10, 6))
-    edge_lo = float(info.get("edge_lo", 0.0))
-    edge_hi = float(info.get("edge_hi", 1.0))
+    edge_lo, edge_hi = run.edge or (0.0, 1.0)
     bin_m = float(info.get("bin_m") or 0.1)
     depth = np.asarray(info.get("patrol_depth") or [], dtype=float)
     min_depth = float(info.get("min_depth", 0.0))
-    xs = [tr.x for tr in run.truth.values()]
-    ys = [tr.y for tr in run.truth.values()]
+    tracks = run.positions
+    xs = [tr.x for tr in tracks.values()]
+    ys = [tr.y for tr in tracks.values()]
     all_x = np.concatenate(xs + [np.array([edge_lo, edge_hi])])
     all_y = np.concatenate(ys + [np.array([-1.0, depth.max() if depth.size else 1.0])])
     x0, x1 = float(all_x.min()) - 0.5, float(all_x.max()) + 0.5
@@ -105,7 +105,7 @@ def map_figure(run: RunData, path: str | Path) -> None:
         ax.stairs(depth, edges, color="darkgreen", lw=1.2, label="patrol depth")
     ax.plot([edge_lo, edge_hi], [0.0, 0.0], color="black", lw=1.5, label="edge")
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    for j, (robot, tr) in enumerate(sorted(run.truth.items())):
+    for j, (robot, tr) in enumerate(sorted(tracks.items())):
         c = colours[j % len(colours)]
         step = _thin(tr.x.size)
         ax.plot(tr.x[step], tr.y[step], color=c, lw=0.7, label=f"robot {robot}")
@@ -127,7 +127,8 @@ def map_figure(run: RunData, path: str | Path) -> None:
     ax.set_aspect("equal")
     ax.set_xlabel("x along the edge (m)")
     ax.set_ylabel("y into the ice (m)")
-    title = f"map {info.get('map', '?')}, start {info.get('start', '?')}: robot tracks (truth)"
+    source = "truth" if run.positions_from == "truth" else "agents' poses, no ground truth"
+    title = f"map {info.get('map', '?')}, start {info.get('start', '?')}: robot tracks ({source})"
     ax.set_title(title)
     fig.tight_layout()
     fig.savefig(path, dpi=110)

@@ -60,10 +60,31 @@ class RunData:
     alive: dict[int, list[tuple[int, bool]]] = field(default_factory=dict)  # (log ns, alive)
     poses: dict[int, Truth] = field(default_factory=dict)  # the poses the agents were given
     odometry: dict[int, np.ndarray] = field(default_factory=dict)  # rows t, dist, dtheta
+    # the edge's ends as the agents published them (a run with no world has no WorldInfo)
+    agents_edge: tuple[float, float] | None = None
 
     @property
     def robot_ids(self) -> list[int]:
         return sorted(set(self.truth) | set(self.states))
+
+    @property
+    def positions_from(self) -> str:
+        """Where the measures take the robots' positions from: "truth" (the simulator's)
+        when the recording has it, else "poses" (the poses the agents were given: on
+        hardware, the localizer's), else "none"."""
+        return "truth" if self.truth else "poses" if self.poses else "none"
+
+    @property
+    def positions(self) -> dict[int, Truth]:
+        """Each robot's track for the measures, from ``positions_from``."""
+        return self.truth if self.truth else self.poses
+
+    @property
+    def edge(self) -> tuple[float, float] | None:
+        """The edge's ends: the world's, else the agents'."""
+        if "edge_lo" in self.info and "edge_hi" in self.info:
+            return float(self.info["edge_lo"]), float(self.info["edge_hi"])
+        return self.agents_edge
 
 
 def _columns(rows: list[tuple[float, ...]], names: tuple[str, ...]) -> dict[str, np.ndarray]:
@@ -94,6 +115,7 @@ def load_run(path: str | Path) -> RunData:
     poses: dict[int, list[tuple[float, ...]]] = defaultdict(list)
     odometry: dict[int, list[tuple[float, ...]]] = defaultdict(list)
     invalid = 0
+    agents_edge: tuple[float, float] | None = None
     try:
         with open(path, "rb") as stream:
             reader = make_reader(stream)
@@ -122,6 +144,7 @@ def load_run(path: str | Path) -> RunData:
                 elif topic.endswith("/state") and topic.startswith("agent/"):
                     msg = json.loads(message.data)
                     states[int(msg["robot"])].append(tuple(msg[f] for f in STATE_FIELDS))
+                    agents_edge = (msg["edge_lo"], msg["edge_hi"])
                 elif topic.endswith("/pose") and topic.startswith("robot/"):
                     msg = json.loads(message.data)
                     poses[int(msg["robot"])].append(tuple(msg[f] for f in TRUTH_FIELDS))
@@ -159,4 +182,5 @@ def load_run(path: str | Path) -> RunData:
             r: np.stack(list(_columns(rows, ODOM_FIELDS).values()))
             for r, rows in odometry.items()
         },
+        agents_edge=agents_edge,
     )

@@ -28,7 +28,7 @@ def time_grid(run: RunData) -> np.ndarray:
     """The ticks' times, or every recorded time if no tick was recorded."""
     if run.tick_t.size:
         return np.unique(run.tick_t)
-    parts = [tr.t for tr in run.truth.values()] + [st.t for st in run.states.values()]
+    parts = [tr.t for tr in run.positions.values()] + [st.t for st in run.states.values()]
     return np.unique(np.concatenate(parts)) if parts else np.empty(0)
 
 
@@ -74,7 +74,9 @@ def active_pairs(ids: list[int], live: np.ndarray) -> tuple[list[tuple[int, int]
 def error_series(run: RunData) -> ErrorSeries:
     t = time_grid(run)
     age = max_age_s(run)
-    ids = sorted(set(run.truth) & set(run.states))
+    # every agent that published; positions from truth, else (hardware) the agents' poses
+    tracks = run.positions
+    ids = sorted(run.states)
     pairs, active = active_pairs(ids, live_matrix(run, t, ids))
     depth = run.info.get("patrol_depth") or []
     edge_lo = float(run.info.get("edge_lo", 0.0))
@@ -85,20 +87,25 @@ def error_series(run: RunData) -> ErrorSeries:
     work: dict[int, np.ndarray] = {}
     work_agents: dict[int, np.ndarray] = {}
     phase_agents: dict[int, np.ndarray] = {}
+    unknown = np.full(t.shape, np.nan)
     for i in ids:
-        tr, st = run.truth[i], run.states[i]
-        x = m.hold(tr.t, tr.x, t, age)
+        st = run.states[i]
         lo = m.hold(st.t, st.lo, t, age)
         hi = m.hold(st.t, st.hi, t, age)
-        direction = m.hold(st.t, st.direction, t, age)
-        phase[i] = m.position_phase(x, lo, hi, direction)
-        dir_on_track = m.hold(st.t, st.direction, tr.t, age)
-        along_path = m.path_length_phase(tr.x, tr.y, dir_on_track)
-        phase_path[i] = m.hold(tr.t, along_path, t, age)
+        tr = tracks.get(i)
+        if tr is None:
+            phase[i] = phase_path[i] = unknown
+        else:
+            x = m.hold(tr.t, tr.x, t, age)
+            direction = m.hold(st.t, st.direction, t, age)
+            phase[i] = m.position_phase(x, lo, hi, direction)
+            dir_on_track = m.hold(st.t, st.direction, tr.t, age)
+            along_path = m.path_length_phase(tr.x, tr.y, dir_on_track)
+            phase_path[i] = m.hold(tr.t, along_path, t, age)
         work[i] = (
             m.true_workload(lo, hi, edge_lo, bin_m, depth)
             if len(depth)
-            else np.full(t.shape, np.nan)
+            else unknown
         )
         work_agents[i] = m.hold(st.t, st.workload, t, age)
         phase_agents[i] = m.hold(st.t, st.phase, t, age)

@@ -53,6 +53,7 @@ KEYS = (
     "loc_error_p95_m",
     "phase_sse_agents_rad",
     "workload_sse_agents_m2",
+    "positions_from",
 )
 
 
@@ -102,15 +103,15 @@ class Revisit:
 
 def revisit(run: RunData, t: np.ndarray) -> Revisit | None:
     """Revisit times of points every 0.1 m along the edge, over the second half of the
-    run; one visit per robot sweep. None without truth, edge or time."""
-    info = run.info
-    if t.size < 2 or not run.truth or "edge_lo" not in info:
+    run; one visit per robot sweep. None without positions, edge or time."""
+    tracks, edge = run.positions, run.edge
+    if t.size < 2 or not tracks or edge is None:
         return None
     t_from, t_to = float(t[0] + 0.5 * (t[-1] - t[0])), float(t[-1])
-    edge_lo, edge_hi = float(info["edge_lo"]), float(info["edge_hi"])
-    radius = float(info.get("robot_radius", 0.17))
+    edge_lo, edge_hi = edge
+    radius = float(run.info.get("robot_radius", 0.17))
     visit_t, visit_x, visit_group = [], [], []
-    for rid, tr in run.truth.items():
+    for rid, tr in tracks.items():
         tc, xc = m.crossings(tr.t, tr.x, tr.y)
         visit_t.append(tc)
         visit_x.append(xc)
@@ -126,7 +127,7 @@ def revisit(run: RunData, t: np.ndarray) -> Revisit | None:
         VISIT_MERGE_S,
         np.concatenate(visit_group),
     )
-    rate = m.sweep_rate([(tr.t, tr.x) for tr in run.truth.values()], t_from, t_to)
+    rate = m.sweep_rate([(tr.t, tr.x) for tr in tracks.values()], t_from, t_to)
     return Revisit(points, gaps, t_from, t_to, m.ideal_revisit(edge_hi - edge_lo, rate))
 
 
@@ -191,6 +192,8 @@ def compute_summary(
         # as the robots see it: from the phases and workloads they published
         "phase_sse_agents_rad": m.steady_state(s.t, s.phase_agents)[0],
         "workload_sse_agents_m2": m.steady_state(s.t, s.workload_agents)[0],
+        # "truth", or "poses" for a recording without ground truth (hardware)
+        "positions_from": run.positions_from,
     }
     assert tuple(out) == KEYS
     return json_safe(out)

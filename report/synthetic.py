@@ -10,7 +10,7 @@ import numpy as np
 
 from recorder.writer import Recording, RunWriter
 from wire.codec import encode
-from wire.messages import AgentState, Tick, Truth, WorldInfo
+from wire.messages import AgentState, Pose, Tick, Truth, WorldInfo
 
 TWO_PI = 2.0 * math.pi
 
@@ -27,11 +27,14 @@ def write_synthetic_run(
     speedup: float = 100.0,
     garbage: int = 0,
     phase_bias: tuple[float, ...] = (0.0,),
+    hardware: bool = False,
 ) -> Path:
     """Write ``run_dir``/run.mcap: each robot sweeps its equal segment in ``cycle_s`` with
     a phase offset decaying with time constant ``settle_s``, weaving across y = 0.
     Wall (log) time runs ``speedup`` times slower than simulation time. ``phase_bias``:
-    added to the phase each robot publishes, as if its own pose estimate were off."""
+    added to the phase each robot publishes, as if its own pose estimate were off.
+    ``hardware``: record what a hardware run has, the agents' states and their poses (as
+    a localizer publishes them), with no world: no WorldInfo, Tick or ground truth."""
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     edge_lo, edge_hi = edge
@@ -58,7 +61,8 @@ def write_synthetic_run(
     wall0 = 1_700_000_000_000_000_000
     writer = RunWriter(run_dir / "run.mcap", library="btrack synthetic")
     rec = Recording(writer)
-    rec.handle("world/info", encode(info), wall0)
+    if not hardware:
+        rec.handle("world/info", encode(info), wall0)
     steps = round(duration_s / dt)
     for k in range(steps + 1):
         t = k * dt
@@ -75,6 +79,9 @@ def write_synthetic_run(
             y = -0.3 + 0.8 * (0.5 - 0.5 * math.cos(TWO_PI * t / 2.0))
             xs.append(x)
             ys.append(y)
+            if hardware:
+                pose = Pose(t, k, i, x, y, 0.0, source="pf")
+                rec.handle(f"robot/{i}/pose", encode(pose), log_ns)
             state = AgentState(
                 t=t,
                 k=k,
@@ -92,10 +99,12 @@ def write_synthetic_run(
                 edge_hi=edge_hi,
             )
             rec.handle(f"agent/{i}/state", encode(state), log_ns)
-        rec.handle("world/truth", encode(Truth(t, k, list(range(robots)), xs, ys,
-                                               [0.0] * robots)), log_ns)
         if k < garbage:
             rec.handle("agent/0/state", b"\xc1 not msgpack", log_ns)
+        if hardware:
+            continue
+        rec.handle("world/truth", encode(Truth(t, k, list(range(robots)), xs, ys,
+                                               [0.0] * robots)), log_ns)
         tick = Tick(t=t, k=k, live=list(range(robots)), done=k == steps)
         rec.handle("world/tick", encode(tick), log_ns)
     writer.close()

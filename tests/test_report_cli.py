@@ -77,6 +77,27 @@ def test_errors_as_the_agents_see_them_come_from_what_they_published(tmp_path: P
     assert "as the agents see it" in text
 
 
+def test_a_hardware_recording_is_measured_from_the_agents_poses(tmp_path: Path) -> None:
+    # no world: no WorldInfo, Tick or ground truth; the localizer's poses and the states
+    sim, hw = tmp_path / "sim", tmp_path / "hw"
+    write_synthetic_run(sim, duration_s=60.0)
+    write_synthetic_run(hw, duration_s=60.0, hardware=True)
+    for d in (sim, hw):
+        done = btrack("report", str(d))
+        assert done.returncode == 0, done.stderr
+    ours, ref = (json.loads((d / "summary.json").read_text()) for d in (hw, sim))
+    assert (ours["positions_from"], ref["positions_from"]) == ("poses", "truth")
+    assert ours["ticks"] == 0 and ours["map"] is None
+    # the poses are where the robots were: the same position-based measures as truth
+    for key in ("phase_q1_rad", "phase_sse_rad", "revisit_mean_s", "phase_sse_agents_rad"):
+        assert ours[key] is not None and ours[key] == pytest.approx(ref[key], rel=0.05), key
+    assert ours["phase_q1_rad"] > 0.1  # the decaying offset is seen
+    assert ours["workload_sse_m2"] is None  # no true patrol depth without a world
+    assert ours["workload_sse_agents_m2"] == pytest.approx(0.0, abs=1e-9)
+    assert "No ground truth in this recording" in (hw / "report.md").read_text()
+    assert "No ground truth" not in (sim / "report.md").read_text()
+
+
 def test_wall_time_is_the_worlds_clock_when_the_ticks_carry_it(tmp_path: Path) -> None:
     # a recorder that took the ticks late and in a burst (log times 1 ms apart) must not
     # change the speed: the world stamped them 10 ms apart, 10x real time at 10 Hz
