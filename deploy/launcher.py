@@ -140,7 +140,9 @@ class Monitor:
 class Injector:
     """Carries out the fault schedule: the tick callback only notes the time and wakes
     the launcher's loop, which signals, starts and announces (Fault on the bus, for the
-    recording) from its own thread."""
+    recording) from its own thread. We hear the ticks through the niced router, up to
+    seconds late under load, so the world holds after each fault's tick until it hears
+    the announcement (``--hold-at``): the fault lands on that tick all the same."""
 
     def __init__(self, session: zenoh.Session, keys: Keys, schedule: list[faults.Fault],
                  group: ProcessGroup, agent_args: Callable[[int], list[str]]):
@@ -291,6 +293,9 @@ def run(args: argparse.Namespace) -> int:
                           "--seed", str(args.seed), "--wait-recorder", *member]
             if args.realtime:
                 world_args.append("--realtime")
+            else:  # each fault lands on its tick, however late we hear the clock
+                for f in schedule:
+                    world_args += ["--hold-at", str(f.at_s)]
             for spec in args.kidnap:
                 world_args += ["--kidnap", spec]
             world = group.start("world", world_args)

@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import queue
 import signal
 import sys
@@ -32,6 +33,7 @@ from simworld.world import ROBOT_RADIUS_M, World, parse_start
 from wire import (
     Cmd,
     DecodeError,
+    Fault,
     Keys,
     Pose,
     Scan,
@@ -55,7 +57,7 @@ INFO_EVERY_TICKS = 100
 
 # queue items, built on Zenoh threads: (kind, key, payload-or-flag)
 _ALIVE, _RECORDER, _CMD, _STOP = "alive", "recorder", "cmd", "stop"
-_LOCALIZER = "localizer"
+_LOCALIZER, _FAULT = "localizer", "fault"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -130,6 +132,23 @@ def build_parser() -> argparse.ArgumentParser:
         "publish their first (0.5)",
     )
     p.add_argument(
+        "--hold-at",
+        type=float,
+        action="append",
+        default=[],
+        metavar="T",
+        help="lockstep: after the first tick at or past simulated time T, wait for the "
+        "launcher's fault announcement (a Fault at T or later) before going on, so an "
+        "injected fault lands on that exact tick however late the launcher hears the "
+        "clock (repeatable)",
+    )
+    p.add_argument(
+        "--hold-timeout",
+        type=float,
+        default=10.0,
+        help="wall seconds to wait at a --hold-at before going on without it (10)",
+    )
+    p.add_argument(
         "--wait-recorder",
         action="store_true",
         help="also wait for the recorder's liveliness token before tick 0",
@@ -162,6 +181,8 @@ class WorldProcess:
         self.kidnaps = parse_kidnaps(args.kidnap, self.dt)
         self.dropped = 0
         self.timeouts = 0
+        self.holds = sorted(args.hold_at)  # simulated times to hold at, next first
+        self.fault_t = -math.inf  # the latest fault the launcher announced
         self.stopping = False
         self.edge_lo, self.edge_hi = world.map.edge_lo, world.map.edge_hi
         self.pose_source = args.localization
@@ -190,6 +211,9 @@ class WorldProcess:
                 k.alive_recorder(),
                 lambda s: put((_RECORDER, str(s.key_expr), s.kind == zenoh.SampleKind.PUT)),
                 history=True,
+            ),
+            session.declare_subscriber(
+                k.fault(), lambda s: put((_FAULT, str(s.key_expr), s.payload.to_bytes()))
             ),
             session.liveliness().declare_subscriber(
                 k.alive_localizer(),
@@ -230,6 +254,11 @@ class WorldProcess:
         elif kind == _LOCALIZER:
             self.localizer_alive = bool(value)
             log.info("localizer %s", "alive" if value else "gone")
+        elif kind == _FAULT:
+            try:
+                self.fault_t = max(self.fault_t, decode(Fault, value).t)
+            except DecodeError as exc:
+                log.warning("dropped a fault announcement: %s", exc)
         return None
 
     def _drop(self, key: str, why: str) -> None:
@@ -339,8 +368,27 @@ class WorldProcess:
             self.pub_tick.put(encode(Tick(t, k, live, waited_ms, k == total - 1,
                                           time.time_ns())))
             world.step({i: c for i, c in cmds.items() if i in self.live}, dt)
+            self._hold(t)
             k += 1
         return k
+
+    def _hold(self, t: float) -> None:
+        """After tick time ``t``: if a --hold-at is due, wait until the launcher has
+        announced the fault (or --hold-timeout), handling membership meanwhile."""
+        due = [h for h in self.holds if h <= t]
+        if not due:
+            return
+        self.holds = self.holds[len(due):]
+        deadline = time.monotonic() + self.args.hold_timeout
+        while self.fault_t < due[-1] and not self.stopping:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                log.warning("t = %.1f s: no fault announced for %g s; going on", t, due[-1])
+                return
+            try:
+                self._handle(self.events.get(timeout=remaining))
+            except queue.Empty:
+                pass
 
     def run_realtime(self, total: int) -> int:
         events, world, dt = self.events, self.world, self.dt
