@@ -31,6 +31,7 @@ from wire.session import add_session_args, declare_publisher, open_session, opti
 
 HISTORY = 8  # neighbour states kept per neighbour, by tick
 DEFAULT_LEASE_S = 1.0  # lease an agent announces unless told otherwise
+MEMBERS_TIMEOUT_S = 2.0  # how long the start-up question "who is alive?" may take
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -241,6 +242,22 @@ class AgentNode:
         self.sense, self.pose = self.senses[k], self.poses[k]
         return k
 
+    def learn_members(self, timeout_s: float = MEMBERS_TIMEOUT_S) -> None:
+        """Ask who is alive now, before the first tick. The liveliness subscriber's
+        history comes asynchronously and a Sense can come first: an agent restarted in
+        a running team that acted on it would think itself alone and claim the whole
+        edge for a tick. Later changes come through the subscriber as usual."""
+        try:
+            replies = self.session.liveliness().get(self.keys.alive("*"), timeout=timeout_s)
+            for reply in replies:
+                sample = reply.ok
+                rid = None if sample is None else Keys.robot_of(str(sample.key_expr))
+                if rid is not None and rid != self.robot:
+                    self.live.add(rid)
+        except zenoh.ZError as exc:  # the subscriber will tell us in time
+            print(f"agent {self.robot}: liveliness query failed: {exc}", file=sys.stderr)
+        self._follow_neighbours()
+
     def run(self) -> None:
         deadline: float | None = None
         inbox = self.inbox
@@ -262,6 +279,9 @@ class AgentNode:
                 # Keep a running neighbour deadline: with hardware, tick k+1's Sense often
                 # comes before tick k's Pose, and resetting here would wait forever.
                 continue
+            if self.controller is None and k > 0 and not self._neighbours_heard():
+                self._stand_still(k)  # joining a running team: claim once we hear them
+                continue
             ready = self._neighbours_ready(k) if k > 0 else self._team_heard()
             if not ready:
                 if deadline is None:
@@ -270,6 +290,22 @@ class AgentNode:
                     continue
             deadline = None
             self._tick(k)
+
+    def _neighbours_heard(self) -> bool:
+        """Whether we have a state of every live neighbour."""
+        return all(rid is None or self.states.get(rid) for rid in self.neighbours())
+
+    def _stand_still(self, k: int) -> None:
+        """Tick k of an agent joining a running team before it has heard its neighbours:
+        a zero command, so the world need not wait for us, and no state, so the
+        neighbours keep their segments. Their states of tick k then reach us (our
+        subscriptions are in place by now), and at k+1 we claim our share of them.
+        Claiming sooner would take a neighbour not heard yet for the end of the chain
+        and claim the edge up to its end."""
+        sense = self.sense
+        assert sense is not None
+        self.pub_cmd.put(encode(Cmd(t=sense.t, k=k, robot=self.robot, v=0.0, omega=0.0)))
+        self.last_k = k
 
     def _tick(self, k: int) -> None:
         sense, pose = self.sense, self.pose
@@ -335,6 +371,7 @@ def main(argv: list[str] | None = None) -> int:
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, lambda *_: node.stop())
         try:
+            node.learn_members()
             node.run()
         finally:
             node.close()

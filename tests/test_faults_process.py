@@ -101,14 +101,17 @@ def test_chaos_with_a_fourth_robot_joining_keeps_the_edge_covered(tmp_path):
     kinds = {f["kind"] for f in run.faults}
     assert "join" in kinds and kinds & {"kill", "freeze"}, run.faults
     assert 3 in run.tick_live[-1] and 3 in run.states
-    # the coverage invariant at every recorded tick, but for the second after each
-    # change of membership
+    # the coverage invariant at every recorded tick, but around each change of
+    # membership (half a second before to a second after)
     t = time_grid(run)
     ok = coverage_ok(*coverage(run, t))
     changes = membership_changes(run)
     settling = np.zeros(t.size, dtype=bool)
     for c in changes:
-        settling |= (t >= c) & (t < c + 1.0)
+        # each process hears a token come or go at its own moment: an agent may act on
+        # it a tick or two before the world's live list shows it (0.5 mm of overlap
+        # for one tick was seen)
+        settling |= (t >= c - 0.5) & (t < c + 1.0)
     # an agent that (re)joins is live a little before its first state: count from it
     for st in run.states.values():
         resumed = st.t[np.concatenate([[True], np.diff(st.t) > 1.0])]
@@ -116,4 +119,13 @@ def test_chaos_with_a_fourth_robot_joining_keeps_the_edge_covered(tmp_path):
             settling |= (t >= t0) & (t < t0 + 1.0)
     bad = t[~ok & ~settling]
     assert bad.size == 0, bad[:10]
+    # an agent that (re)joins the running team knows its live neighbours before it
+    # claims, and claims a share of theirs: never the edge up to its end past a
+    # neighbour it has not heard yet
+    edge = run.info["edge_hi"] - run.info["edge_lo"]
+    for rid, st in run.states.items():
+        for j in np.flatnonzero(np.concatenate([[st.t[0] > 1.0], np.diff(st.t) > 1.0])):
+            claim = (float(st.t[j]), float(st.lo[j]), float(st.hi[j]))
+            assert (st.lower[j], st.upper[j]) != (-1, -1), (rid, claim)
+            assert st.hi[j] - st.lo[j] <= 0.5 * edge + 1e-9, (rid, claim)
     assert run.states[3].hi[-1] - run.states[3].lo[-1] > 0.5  # the newcomer has work
