@@ -31,6 +31,7 @@ from wire.session import add_session_args, declare_publisher, open_session, opti
 
 HISTORY = 8  # neighbour states kept per neighbour, by tick
 DEFAULT_LEASE_S = 1.0  # lease an agent announces unless told otherwise
+JOIN_WAIT_S = 1.0  # longest a joining agent stands still for its neighbours' states
 MEMBERS_TIMEOUT_S = 2.0  # how long the start-up question "who is alive?" may take
 
 
@@ -86,6 +87,7 @@ class AgentNode:
         self.dropped = 0
         self.ticks = 0
         self.controller: Controller | None = None
+        self.join_deadline: float | None = None  # see _wait_to_join
         self.stopping = False
         self.pub_state = declare_publisher(session, keys.state(robot))
         self.pub_cmd = declare_publisher(session, keys.cmd(robot))
@@ -279,7 +281,7 @@ class AgentNode:
                 # Keep a running neighbour deadline: with hardware, tick k+1's Sense often
                 # comes before tick k's Pose, and resetting here would wait forever.
                 continue
-            if self.controller is None and k > 0 and not self._neighbours_heard():
+            if self.controller is None and k > 0 and self._wait_to_join():
                 self._stand_still(k)  # joining a running team: claim once we hear them
                 continue
             ready = self._neighbours_ready(k) if k > 0 else self._team_heard()
@@ -291,9 +293,16 @@ class AgentNode:
             deadline = None
             self._tick(k)
 
-    def _neighbours_heard(self) -> bool:
-        """Whether we have a state of every live neighbour."""
-        return all(rid is None or self.states.get(rid) for rid in self.neighbours())
+    def _wait_to_join(self) -> bool:
+        """Whether to stand still rather than claim a segment now: some live neighbour's
+        state is not here yet, and we have stood still for less than JOIN_WAIT_S (a
+        team starting together on the wall clock has nobody publishing yet)."""
+        if all(rid is None or self.states.get(rid) for rid in self.neighbours()):
+            return False
+        now = time.monotonic()
+        if self.join_deadline is None:
+            self.join_deadline = now + JOIN_WAIT_S
+        return now < self.join_deadline
 
     def _stand_still(self, k: int) -> None:
         """Tick k of an agent joining a running team before it has heard its neighbours:
