@@ -212,16 +212,7 @@ def converge_time(t: np.ndarray, errors: np.ndarray, band: float, smooth_s: floa
     it never settles. The average spans a patrol pass, so the saw-tooth that the
     position-based phase makes within each pass does not count as leaving the band.
     Samples with no value are skipped."""
-    t = np.asarray(t, dtype=float)
-    worst = running_mean(t, max_over_pairs(errors), smooth_s)
-    known = np.flatnonzero(np.isfinite(worst))
-    if t.size == 0 or known.size == 0:
-        return math.nan
-    outside = known[worst[known] > band]
-    if outside.size == 0:
-        return float(t[known[0]] - t[0])
-    after = known[known > outside[-1]]
-    return float(t[after[0]] - t[0]) if after.size else math.nan
+    return _band_time(t, errors, band, smooth_s, to_stay=True)
 
 
 def recovery_time(t: np.ndarray, errors: np.ndarray, band: float, smooth_s: float = 0.0
@@ -230,6 +221,12 @@ def recovery_time(t: np.ndarray, errors: np.ndarray, band: float, smooth_s: floa
     trailing ``smooth_s`` seconds, first came back within ``band`` after having left
     it; 0 if it never left; NaN if it never came back. Unlike ``converge_time``, a later
     excursion does not undo the recovery: that belongs to the steady-state measures."""
+    return _band_time(t, errors, band, smooth_s, to_stay=False)
+
+
+def _band_time(t: np.ndarray, errors: np.ndarray, band: float, smooth_s: float,
+               to_stay: bool) -> float:
+    """Back within ``band`` after the last (``to_stay``) or the first excursion."""
     t = np.asarray(t, dtype=float)
     worst = running_mean(t, max_over_pairs(errors), smooth_s)
     known = np.flatnonzero(np.isfinite(worst))
@@ -238,7 +235,10 @@ def recovery_time(t: np.ndarray, errors: np.ndarray, band: float, smooth_s: floa
     outside = known[worst[known] > band]
     if outside.size == 0:
         return float(t[known[0]] - t[0])
-    back = known[(known > outside[0]) & (worst[known] <= band)]
+    if to_stay:
+        back = known[known > outside[-1]]
+    else:
+        back = known[(known > outside[0]) & (worst[known] <= band)]
     return float(t[back[0]] - t[0]) if back.size else math.nan
 
 
