@@ -31,7 +31,7 @@ from wire import Fault as WireFault
 from wire.session import SessionOptions, declare_publisher, loopback_options, open_session
 
 STATE_RING = 256  # agents' states kept between two progress lines (the latest count)
-BACKGROUND_NICE = 10  # router and recorder are off the lockstep's path: they may lag
+BACKGROUND_NICE = 10  # the recorder (the team's router) is off the lockstep's path
 STARTUP_S = 60.0
 
 
@@ -140,7 +140,7 @@ class Monitor:
 class Injector:
     """Carries out the fault schedule: the tick callback only notes the time and wakes
     the launcher's loop, which signals, starts and announces (Fault on the bus, for the
-    recording) from its own thread. We hear the ticks through the niced router, up to
+    recording) from its own thread. We hear the ticks through the niced recorder, up to
     seconds late under load, so the world holds after each fault's tick until it hears
     the announcement (``--hold-at``): the fault lands on that tick all the same."""
 
@@ -245,11 +245,11 @@ def run(args: argparse.Namespace) -> int:
     ns = args.ns or f"btrack/sim-{os.getpid()}-{int(time.time() * 1000) % 10**9}"
     keys = Keys(ns)
     port = free_port()
-    # The launcher starts a router (niced: it carries only what the recorder and the
-    # launcher hear) and is one of its clients, as is the recorder: however far behind
-    # the recorder falls, the router holds its link. The processes of the lockstep
-    # (world, agents, localizer) are peers that link to each other directly through it,
-    # one hop instead of two per message (30 % faster, BENCHMARKS.md).
+    # The recorder is the team's router (niced: it carries only what it records and
+    # what the launcher, its client, hears). The processes of the lockstep (world,
+    # agents, localizer) are peers that connect to it and link to each other directly,
+    # one hop per message; every message reaches the recorder in one hop too, with no
+    # router process forwarding to it (BENCHMARKS.md).
     hub = f"tcp/127.0.0.1:{port}"
     client = SessionOptions(ns=ns, mode="client", connect=(hub,), multicast=False)
     member = loopback_options(ns, port).to_args()
@@ -258,14 +258,13 @@ def run(args: argparse.Namespace) -> int:
           f"localization {args.localization}, {args.duration:g} s simulated -> {out}")
     t_wall0 = time.monotonic()
     try:
-        router = group.start("router", ["router", "--listen", hub, "--ns", ns, "--no-multicast"],
-                             nice=BACKGROUND_NICE)
-        if not _wait_listening(port, router, STARTUP_S):
-            return _fail(group, router, f"did not listen on {hub} within {STARTUP_S:g} s")
+        recorder = group.start("recorder", [
+            "record", "--out", str(out), "--ns", ns, "--mode", "router", "--listen", hub,
+            "--no-multicast"], nice=BACKGROUND_NICE)
+        if not _wait_listening(port, recorder, STARTUP_S):
+            return _fail(group, recorder, f"did not listen on {hub} within {STARTUP_S:g} s")
         with open_session(client) as session:
             monitor = Monitor(session, keys)
-            recorder = group.start("recorder", ["record", "--out", str(out),
-                                                *client.to_args()], nice=BACKGROUND_NICE)
             while not monitor.recorder_alive.wait(0.2):
                 if not recorder.alive():
                     return _fail(group, recorder, "failed to start")
@@ -279,7 +278,7 @@ def run(args: argparse.Namespace) -> int:
             injector = Injector(session, keys, schedule, group, agent_args)
             for i in range(args.robots):
                 injector.start_agent(i)
-            vital = [router]  # processes the run cannot go on without
+            vital: list[Child] = []  # processes the run cannot go on without
             if args.localization == "pf":
                 vital.append(group.start("localizer", [
                     "localizer", "--robots", str(bodies), "--seed", str(args.seed), *member]))
@@ -325,10 +324,10 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _wait_listening(port: int, router: Child, timeout_s: float) -> bool:
-    """Until the router accepts connections on loopback ``port`` (or has died)."""
+def _wait_listening(port: int, child: Child, timeout_s: float) -> bool:
+    """Until ``child`` accepts connections on loopback ``port`` (or has died)."""
     deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline and router.alive():
+    while time.monotonic() < deadline and child.alive():
         with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
             if s.connect_ex(("127.0.0.1", port)) == 0:
                 return True

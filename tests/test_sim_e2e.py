@@ -51,7 +51,7 @@ def test_run_leaves_recording_report_and_no_process(half_algae_run):
         assert (out / name).exists(), name
     assert (out / "errors.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     pids = json.loads((out / "logs" / "pids.json").read_text())
-    assert set(pids) == {"router", "recorder", "world", "agent0", "agent1", "agent2"}
+    assert set(pids) == {"recorder", "world", "agent0", "agent1", "agent2"}
     assert not [name for name, pid in pids.items() if pid_alive(pid)]
 
 
@@ -70,10 +70,9 @@ def test_ctrl_c_stops_every_process(tmp_path):
             assert time.monotonic() < deadline, "the world never started"
             time.sleep(0.1)
         pids = json.loads(pids_file.read_text())
-        # the router and the recorder are off the lockstep's path: they yield the cores
+        # the recorder (the team's router) is off the lockstep's path: it yields the cores
         lockstep = os.getpriority(os.PRIO_PROCESS, pids["world"])
         assert os.getpriority(os.PRIO_PROCESS, pids["agent1"]) == lockstep
-        assert os.getpriority(os.PRIO_PROCESS, pids["router"]) > lockstep
         assert os.getpriority(os.PRIO_PROCESS, pids["recorder"]) > lockstep
         os.kill(proc.pid, signal.SIGINT)
         assert proc.wait(30) == 130
