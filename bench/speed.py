@@ -3,9 +3,14 @@
 Runs `btrack sim` (world, recorder and N agents as separate processes) for each team
 size, --repeat times, and prints the world's tick rate and speed-up (median, min and
 max over the repeats: a shared 2-core machine varies by +-20 % run to run) and the
-whole command's wall time, start-up and the recorder's catch-up included. Usage:
+whole command's wall time, start-up and the recorder's catch-up included.
 
-    .venv/bin/python bench/speed.py [--robots 3 10] [--duration 600] [--repeat 5]
+``--bare`` adds, before each setting, the same world and agents with nothing else: no
+recorder, no launcher, a plain ``btrack router`` only for discovery. It measures what
+the machine gives the lockstep at that moment (this shared host's speed drifts by a
+third within an hour), so a change can be told from the host's drift. Usage:
+
+    .venv/bin/python bench/speed.py [--robots 3 10] [--duration 600] [--repeat 5] [--bare]
 """
 
 from __future__ import annotations
@@ -28,6 +33,8 @@ def main() -> int:
     p.add_argument("--repeat", type=int, default=3, help="runs per setting (3)")
     p.add_argument("--localization", nargs="+", default=["truth", "pf"],
                    help="pose sources to measure (default: truth pf)")
+    p.add_argument("--bare", action="store_true",
+                   help="also time world + agents alone (no recorder): the host's state")
     args = p.parse_args()
     print(f"{'poses':>8} {'robots':>6} {'sim s':>7} {'world s':>8} {'ticks/s':>8} "
           f"{'speed-up median (min-max)':>27} {'command s':>10}")
@@ -36,8 +43,39 @@ def main() -> int:
     return 0
 
 
+def bare_speedup(n: int, duration: float, loc: str) -> float:
+    """World and n agents alone, peers of a plain router used for discovery only."""
+    from deploy.procs import free_port
+
+    port = free_port()
+    ns = f"bench/bare-{port}"
+    peer = ["--ns", ns, "--mode", "peer", "--connect", f"tcp/127.0.0.1:{port}",
+            "--listen", "tcp/127.0.0.1:0", "--no-multicast"]
+    btrack = [sys.executable, "-m", "btrack"]
+    quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+    procs = [subprocess.Popen([*btrack, "router", "--listen", f"tcp/127.0.0.1:{port}",
+                               "--ns", ns, "--no-multicast"], **quiet)]
+    try:
+        time.sleep(1.0)
+        procs += [subprocess.Popen([*btrack, "agent", "--id", str(i), "--robots", str(n),
+                                    *peer], **quiet) for i in range(n)]
+        world = subprocess.run(
+            [*btrack, "world", "--robots", str(n), "--localization", loc, "--duration",
+             str(duration), *peer], capture_output=True, text=True, check=True)
+        return float(json.loads(world.stdout.strip().splitlines()[-1])["speedup"])
+    finally:
+        for proc in procs:
+            proc.kill()
+            proc.wait()
+
+
 def run_team_sizes(args: argparse.Namespace, loc: str) -> None:
     for n in args.robots:
+        if args.bare and loc != "pf":
+            bare = [bare_speedup(n, args.duration, loc) for _ in range(args.repeat)]
+            print(f"{'bare':>8} {n:>6} {args.duration:>7.0f} {'':>8} {'':>8} "
+                  f"{statistics.median(bare):>12.1f}x ({min(bare):.1f}-{max(bare):.1f}x)",
+                  flush=True)
         worlds, commands = [], []
         for _ in range(args.repeat):
             with tempfile.TemporaryDirectory() as tmp:
