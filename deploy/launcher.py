@@ -13,7 +13,6 @@ import json
 import math
 import os
 import signal
-import socket
 import sys
 import threading
 import time
@@ -25,7 +24,7 @@ import zenoh
 from agent.controller import Gains
 from agent.stability import check_gains
 from deploy import faults
-from deploy.procs import Child, ProcessGroup, free_port
+from deploy.procs import Child, ProcessGroup, free_port, wait_listening
 from wire import AgentState, DecodeError, Keys, Tick, decode, encode
 from wire import Fault as WireFault
 from wire.session import SessionOptions, declare_publisher, loopback_options, open_session
@@ -261,7 +260,7 @@ def run(args: argparse.Namespace) -> int:
         recorder = group.start("recorder", [
             "record", "--out", str(out), "--ns", ns, "--mode", "router", "--listen", hub,
             "--no-multicast"], nice=BACKGROUND_NICE)
-        if not _wait_listening(port, recorder, STARTUP_S):
+        if not wait_listening(port, recorder, STARTUP_S):
             return _fail(group, recorder, f"did not listen on {hub} within {STARTUP_S:g} s")
         with open_session(client) as session:
             monitor = Monitor(session, keys)
@@ -322,17 +321,6 @@ def run(args: argparse.Namespace) -> int:
     print(json.dumps(summary, indent=2))
     print(f"btrack sim: report in {out / 'report.md'}")
     return 0
-
-
-def _wait_listening(port: int, child: Child, timeout_s: float) -> bool:
-    """Until ``child`` accepts connections on loopback ``port`` (or has died)."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline and child.alive():
-        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-            if s.connect_ex(("127.0.0.1", port)) == 0:
-                return True
-        time.sleep(0.05)
-    return False
 
 
 def _watch(args: argparse.Namespace, group: ProcessGroup, monitor: Monitor, world: Child,

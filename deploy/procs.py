@@ -22,6 +22,17 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
+def wait_listening(port: int, child: Child, timeout_s: float) -> bool:
+    """Until ``child`` accepts connections on loopback ``port`` (or has died)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline and child.alive():
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+            if s.connect_ex(("127.0.0.1", port)) == 0:
+                return True
+        time.sleep(0.05)
+    return False
+
+
 @dataclass
 class Child:
     name: str

@@ -135,7 +135,7 @@ def _progress(case: Case, done: int, total: int, summary: dict[str, Any]) -> str
 
 def run_cases(args: argparse.Namespace, cases: list[Case]) -> list[dict[str, Any]]:
     """Run the cases, ``args.jobs`` at once; return their summaries in case order."""
-    waiting, running = list(cases), []
+    waiting, running = list(cases), list[Case]()
     results: dict[str, dict[str, Any]] = {}
     try:
         while waiting or running:
