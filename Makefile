@@ -20,7 +20,7 @@ test: $(STAMP)
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
-	$(BIN)/mypy agent wire localizer hwbridge
+	$(BIN)/mypy agent wire localizer hwbridge deploy report recorder simworld btrack
 
 bench: $(STAMP)
 	$(BIN)/python bench/speed.py
