@@ -211,8 +211,7 @@ class HilWorld:
         t = k * self.args.dt
         with self.lock:
             poses = [self.world.truth(i) for i in range(self.n)]
-        xs, ys, ths = (list(c) for c in zip(*poses, strict=True))
-        self.pub_truth.put(encode(Truth(t, k, list(range(self.n)), xs, ys, ths)))
+        self.pub_truth.put(encode(Truth.of_team(t, k, poses)))
         for i, (x, y, th) in enumerate(poses):
             self.pub_pose[i].put(encode(Pose(t, k, i, x, y, th)))
 

@@ -67,8 +67,7 @@ def write_synthetic_run(
     for k in range(steps + 1):
         t = k * dt
         log_ns = wall0 + int(t / speedup * 1e9)
-        xs: list[float] = []
-        ys: list[float] = []
+        poses: list[tuple[float, float, float]] = []
         for i in range(robots):
             lo, hi = float(bounds[i]), float(bounds[i + 1])
             offset = phase_offsets[i % len(phase_offsets)] * math.exp(-t / settle_s)
@@ -77,8 +76,7 @@ def write_synthetic_run(
             frac = phi / math.pi if going_up else 2.0 - phi / math.pi
             x = lo + (hi - lo) * frac
             y = -0.3 + 0.8 * (0.5 - 0.5 * math.cos(TWO_PI * t / 2.0))
-            xs.append(x)
-            ys.append(y)
+            poses.append((x, y, 0.0))
             if hardware:
                 pose = Pose(t, k, i, x, y, 0.0, source="pf")
                 rec.handle(f"robot/{i}/pose", encode(pose), log_ns)
@@ -103,8 +101,7 @@ def write_synthetic_run(
             rec.handle("agent/0/state", b"\xc1 not msgpack", log_ns)
         if hardware:
             continue
-        rec.handle("world/truth", encode(Truth(t, k, list(range(robots)), xs, ys,
-                                               [0.0] * robots)), log_ns)
+        rec.handle("world/truth", encode(Truth.of_team(t, k, poses)), log_ns)
         tick = Tick(t=t, k=k, live=list(range(robots)), done=k == steps)
         rec.handle("world/tick", encode(tick), log_ns)
     writer.close()

@@ -303,8 +303,7 @@ class WorldProcess:
             sense = Sense(t, k, i, r.ice, r.algae, r.odom_dist_m, r.odom_dtheta, lo, hi, dt)
             self.pub_sense[i].put(encode(sense))  # an agent may act on its Sense
         # for the recorder only, after the agents' inputs; one message for the team
-        xs, ys, ths = (list(c) for c in zip(*truth, strict=True))
-        self.pub_truth.put(encode(Truth(t, k, list(range(self.n)), xs, ys, ths)))
+        self.pub_truth.put(encode(Truth.of_team(t, k, truth)))
 
     # the clock ---------------------------------------------------------------
     def wait_for_team(self) -> bool:

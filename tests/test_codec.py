@@ -59,6 +59,8 @@ def test_bad_payloads_refused_with_reason(payload, reason):
 def test_team_truth_round_trip_and_shape_checked():
     msg = Truth(0.5, 5, [0, 1, 2], [0.5, 2.5, 4.5], [-1.0, -1.0, 0.2], [0.0, 1.5, -3.0])
     assert decode(Truth, encode(msg)) == msg
+    poses = [(0.5, -1.0, 0.0), (2.5, -1.0, 1.5), (4.5, 0.2, -3.0)]
+    assert Truth.of_team(0.5, 5, poses) == msg
     short = msgpack.packb({**msg.__dict__, "y": [-1.0, -1.0]})
     with pytest.raises(DecodeError, match="one entry per robot"):
         decode(Truth, short)

@@ -101,6 +101,12 @@ class Truth:
     y: list[float]
     theta: list[float]
 
+    @classmethod
+    def of_team(cls, t: float, k: int, poses: list[tuple[float, float, float]]) -> Truth:
+        """The message for robots 0..n-1 at the poses (x, y, theta) given in id order."""
+        return cls(t, k, list(range(len(poses))), [p[0] for p in poses],
+                   [p[1] for p in poses], [p[2] for p in poses])
+
     def check(self) -> None:
         _require(self.t >= 0 and self.k >= 0, "negative t or k")
         n = len(self.robots)
