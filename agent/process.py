@@ -254,11 +254,10 @@ class AgentNode:
             for reply in replies:
                 sample = reply.ok
                 rid = None if sample is None else Keys.robot_of(str(sample.key_expr))
-                if rid is not None and rid != self.robot:
-                    self.live.add(rid)
+                if rid is not None:
+                    self._handle("alive", (rid, True))
         except zenoh.ZError as exc:  # the subscriber will tell us in time
             print(f"agent {self.robot}: liveliness query failed: {exc}", file=sys.stderr)
-        self._follow_neighbours()
 
     def run(self) -> None:
         deadline: float | None = None
