@@ -451,8 +451,10 @@ def _check_args(args: argparse.Namespace) -> str | None:
         return "--team must be between 1 and --robots"
     if not args.dt > 0 or not args.duration > 0:
         return "--dt and --duration must be positive"
-    if min(args.odom_noise, args.cmd_timeout, args.startup_timeout, args.settle) < 0:
-        return "--odom-noise, --cmd-timeout, --startup-timeout and --settle must be >= 0"
+    if min(args.odom_noise, args.cmd_timeout, args.startup_timeout, args.settle,
+           args.hold_timeout) < 0:
+        return ("--odom-noise, --cmd-timeout, --startup-timeout, --settle and "
+                "--hold-timeout must be >= 0")
     if args.laser_noise < 0:
         return "--laser-noise must be >= 0"
     try:

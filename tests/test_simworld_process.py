@@ -178,3 +178,13 @@ def test_world_bad_map_exits_2_without_traceback(tmp_path: Path) -> None:
     )
     assert run.returncode == 2
     assert "cannot read map image" in run.stderr and "Traceback" not in run.stderr
+
+
+def test_world_refuses_a_negative_hold_timeout() -> None:
+    run = subprocess.run(
+        [sys.executable, "-m", "btrack", "world", "--hold-at", "5", "--hold-timeout", "-1",
+         "--no-multicast"],
+        cwd=ROOT, capture_output=True, text=True, timeout=30,
+    )
+    assert run.returncode == 2
+    assert "--hold-timeout must be >= 0" in run.stderr and "Traceback" not in run.stderr
