@@ -45,28 +45,30 @@ def main() -> int:
 
 def bare_speedup(n: int, duration: float, loc: str) -> float:
     """World and n agents alone, peers of a plain router used for discovery only."""
-    from deploy.procs import free_port
+    from deploy.procs import ProcessGroup, free_port, wait_listening
 
     port = free_port()
+    hub = f"tcp/127.0.0.1:{port}"
     ns = f"bench/bare-{port}"
-    peer = ["--ns", ns, "--mode", "peer", "--connect", f"tcp/127.0.0.1:{port}",
-            "--listen", "tcp/127.0.0.1:0", "--no-multicast"]
-    btrack = [sys.executable, "-m", "btrack"]
-    quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
-    procs = [subprocess.Popen([*btrack, "router", "--listen", f"tcp/127.0.0.1:{port}",
-                               "--ns", ns, "--no-multicast"], **quiet)]
-    try:
-        time.sleep(1.0)
-        procs += [subprocess.Popen([*btrack, "agent", "--id", str(i), "--robots", str(n),
-                                    *peer], **quiet) for i in range(n)]
-        world = subprocess.run(
-            [*btrack, "world", "--robots", str(n), "--localization", loc, "--duration",
-             str(duration), *peer], capture_output=True, text=True, check=True)
-        return float(json.loads(world.stdout.strip().splitlines()[-1])["speedup"])
-    finally:
-        for proc in procs:
-            proc.kill()
-            proc.wait()
+    peer = ["--ns", ns, "--mode", "peer", "--connect", hub, "--listen", "tcp/127.0.0.1:0",
+            "--no-multicast"]
+    with tempfile.TemporaryDirectory() as tmp:
+        group = ProcessGroup(Path(tmp))
+        try:
+            router = group.start("router", ["router", "--listen", hub, "--ns", ns,
+                                            "--no-multicast"])
+            if not wait_listening(port, router, 30.0):
+                raise SystemExit(f"bench: the router did not listen on {hub}")
+            for i in range(n):
+                group.start(f"agent{i}", ["agent", "--id", str(i), "--robots", str(n), *peer])
+            world = group.start("world", ["world", "--robots", str(n), "--localization", loc,
+                                          "--duration", str(duration), *peer])
+            if world.proc.wait() != 0:
+                raise SystemExit(f"bench: the bare world failed:\n{world.log_tail()}")
+            log = world.stdout_path.read_text().strip().splitlines()[-1]
+            return float(json.loads(log)["speedup"])
+        finally:
+            group.stop_all()
 
 
 def run_team_sizes(args: argparse.Namespace, loc: str) -> None:
