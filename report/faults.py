@@ -37,11 +37,10 @@ def segment_union(lo: np.ndarray, hi: np.ndarray, edge_lo: float, edge_hi: float
 def coverage(run: RunData, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Gap and overlap (m) of the live agents' segments at each time of ``t``."""
     ids = sorted(run.states)
-    info = run.info
     gap, overlap = np.full(t.size, np.nan), np.full(t.size, np.nan)
-    if not ids or "edge_lo" not in info:
+    if not ids or run.edge is None:
         return gap, overlap
-    edge_lo, edge_hi = float(info["edge_lo"]), float(info["edge_hi"])
+    edge_lo, edge_hi = run.edge
     age = max_age_s(run)
     live = live_matrix(run, t, ids)
     lo = np.vstack([m.hold(run.states[r].t, run.states[r].lo, t, age) for r in ids])
