@@ -16,8 +16,8 @@ from agent.phase import (
     consensus_term,
     desired_phase_step,
     limit_lead,
+    patrol_speed,
     position_to_phase,
-    speed_law,
 )
 
 
@@ -169,7 +169,9 @@ class Controller:
             )
             self.phase_des = desired_phase_step(mine, g.phase_rate, dt, shift, consensus)
         self.phase_des = limit_lead(self.phase_des, phase, g.max_lead_rad)
-        v = speed_law(self.phase_des, phase, g.k_v, self.limits.v_max)
+        on_leg = steer.motion in (Motion.ENTER, Motion.UNDER, Motion.EXIT)
+        v = patrol_speed(self.phase_des, phase, on_leg, steer.measuring, g.k_v,
+                         self.limits.v_max, self.patrol.config.measure_speed)
         v, omega = wheel_limited(v, v * steer.curvature, self.limits)
         depth_avg = self.depth_map.average(self.lo, self.hi)
         workload = depth_avg * (self.hi - self.lo)

@@ -51,6 +51,8 @@ class PatrolConfig:
     max_curvature: float = 10.0  # 1/m
     bin_m: float = 0.1  # resolution of the depth map
     end_inset_m: float = 0.05  # the last pass of a sweep stays this far inside the segment
+    measure_zone_m: float = 0.08  # slow down this close to the depth the map expects
+    measure_speed: float = 0.1  # m/s at least there (1 cm of depth per 10 Hz tick)
 
     def __post_init__(self) -> None:
         if self.passes_per_sweep < 1:
@@ -60,6 +62,8 @@ class PatrolConfig:
         if (self.min_depth_m <= 0 or self.margin_out_m <= 0 or self.bin_m <= 0
                 or self.max_search_m <= 0):
             raise ValueError("depths, margin, search distance and bin must be positive")
+        if self.measure_zone_m < 0 or self.measure_speed <= 0:
+            raise ValueError("measure_zone_m must be >= 0 and measure_speed positive")
 
 
 @dataclass
@@ -127,6 +131,7 @@ class Steer:
 
     curvature: float
     motion: Motion
+    measuring: bool = False  # near where this leg expects the algae to end: go slow
 
 
 class Patrol:
@@ -315,4 +320,12 @@ class Patrol:
             else:
                 return Steer(self.turn_sign / self.turn_radius, self.motion)
         heading = HALF_PI if self.motion in (Motion.ENTER, Motion.UNDER) else -HALF_PI
-        return Steer(self._hold_line(x, theta, heading), self.motion)
+        return Steer(self._hold_line(x, theta, heading), self.motion, self._measuring(x, y))
+
+    def _measuring(self, x: float, y: float) -> bool:
+        """Whether this in-leg is near where the depth map expects the algae to end
+        here, or anywhere under the ice if the map has no depth for this column yet."""
+        if self.motion is not Motion.UNDER or self.entry_y is None:
+            return False
+        expected = self.depth_map.depths.get(self.depth_map.bin_of(x))
+        return expected is None or abs(y - self.entry_y - expected) < self.config.measure_zone_m

@@ -97,6 +97,25 @@ def speed_law(phase_des: float, phase: float, k_v: float, v_max: float) -> float
     return min(max(k_v * wrap_pi(phase_des - phase), 0.0), v_max)
 
 
+def patrol_speed(phase_des: float, phase: float, on_leg: bool, measuring: bool, k_v: float,
+                 v_max: float, v_measure: float) -> float:
+    """Forward speed along the patrol. In the arcs, eq. 4.10 tracks the desired phase.
+    On a straight leg across the edge the position phase of eq. 3.1 does not move, so
+    eq. 4.10 has nothing to track there: its speed would grow only with the lag the leg
+    itself builds up, and a robot would crawl out of every turn and hand its neighbours
+    that lag as phase error. A robot behind its desired phase runs its legs at full
+    speed instead and leaves the tracking to the arcs, except while ``measuring`` (near
+    where the leg expects the algae to end): there it goes no faster than eq. 4.10 or
+    ``v_measure``, whichever is faster, as one 10 Hz tick at full speed is 5 cm of
+    depth. A robot ahead of its desired phase waits, as in eq. 4.10."""
+    law = speed_law(phase_des, phase, k_v, v_max)
+    if not on_leg or wrap_pi(phase_des - phase) <= 0.0:
+        return law
+    if measuring:
+        return min(v_max, max(law, v_measure))
+    return v_max
+
+
 def limit_lead(phase_des: float, phase: float, max_lead: float) -> float:
     """Keep the desired phase within ``max_lead`` of the robot's actual phase, so a
     robot that cannot keep up (saturated, blocked) does not wind up a lead it would

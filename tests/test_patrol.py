@@ -42,6 +42,29 @@ def drive(patrol: Patrol, track: list[tuple[float, float, bool, bool]], lo=0.0, 
     return out
 
 
+def test_patrol_asks_for_slow_legs_only_near_the_expected_algae_end():
+    cfg = PatrolConfig()
+    dm = DepthMap(0.0, 0.1, cfg.min_depth_m)
+    patrol = Patrol(cfg, dm, x=0.55)
+    up = math.pi / 2
+
+    def measuring_along(depths: list[float]) -> list[bool]:
+        patrol.motion, patrol.entry_y, patrol.prev_y, patrol.leg_y = Motion.ENTER, None, None, None
+        out = [patrol.step(0.55, -0.05, up, False, False, 0.0, 2.0).measuring]  # water
+        for y in depths:
+            out.append(patrol.step(0.55, y, up, True, True, 0.0, 2.0).measuring)
+        return out
+
+    # nothing measured in this column yet: slow all the way under the ice
+    assert measuring_along([0.05, 0.5, 1.0]) == [False, True, True, True]
+    dm.record(0.55, 0.9)
+    # edge at 0: fast until 8 cm before the 0.9 m the map expects, slow to 8 cm past it
+    assert measuring_along([0.05, 0.5, 0.83, 0.9, 0.97, 1.2]) == [
+        False, False, False, True, True, True, False]
+    with pytest.raises(ValueError):
+        PatrolConfig(measure_speed=0.0)
+
+
 def test_patrol_measures_depth_at_the_middle_of_the_algae_transition():
     cfg = PatrolConfig()
     dm = DepthMap(0.0, 0.1, cfg.min_depth_m)

@@ -1,5 +1,6 @@
 """Phase wrap, eq. 3.1 both ways, and the desired-phase update (eq. 4.5-4.8, 4.10)."""
 
+import itertools
 import math
 
 import pytest
@@ -11,6 +12,7 @@ from agent.phase import (
     consensus_term,
     desired_phase_step,
     limit_lead,
+    patrol_speed,
     phase_to_position,
     position_to_phase,
     speed_law,
@@ -95,6 +97,23 @@ def test_speed_law_eq_4_10_within_limits():
     assert speed_law(2.0, 1.0, 2.0, 0.5) == 0.5
     assert speed_law(0.9, 1.0, 2.0, 0.5) == 0.0  # ahead: wait, never reverse the patrol
     assert speed_law(0.05, 2 * math.pi - 0.05, 2.0, 0.5) == pytest.approx(0.2)
+
+
+def test_patrol_speed_runs_legs_and_tracks_in_arcs():
+    k_v, v_max, slow = 5.0, 0.5, 0.1
+    # in an arc: eq. 4.10
+    assert patrol_speed(1.01, 1.0, False, False, k_v, v_max, slow) == pytest.approx(0.05)
+    # on a leg, behind even a little: full speed, as the phase cannot move there
+    assert patrol_speed(1.01, 1.0, True, False, k_v, v_max, slow) == v_max
+    # measuring the algae's end: at least v_measure, more if eq. 4.10 asks for it
+    assert patrol_speed(1.01, 1.0, True, True, k_v, v_max, slow) == pytest.approx(slow)
+    assert patrol_speed(1.05, 1.0, True, True, k_v, v_max, slow) == pytest.approx(0.25)
+    assert patrol_speed(2.0, 1.0, True, True, k_v, v_max, slow) == v_max
+    # ahead of the desired phase: wait, on a leg as in an arc, across the 2 pi seam too
+    for on_leg, measuring in itertools.product((False, True), repeat=2):
+        assert patrol_speed(0.9, 1.0, on_leg, measuring, k_v, v_max, slow) == 0.0
+        assert patrol_speed(2 * math.pi - 0.05, 0.05, on_leg, measuring, k_v, v_max,
+                            slow) == 0.0
 
 
 def test_limit_lead():
