@@ -24,7 +24,14 @@ import zenoh
 from agent.controller import Gains
 from agent.stability import check_gains
 from deploy import faults
-from deploy.procs import Child, ProcessGroup, free_port, wait_listening
+from deploy.procs import (
+    Child,
+    ProcessGroup,
+    free_port,
+    interrupted_code,
+    stop_on_sigterm,
+    wait_listening,
+)
 from wire import AgentState, DecodeError, Keys, Tick, decode, encode
 from wire import Fault as WireFault
 from wire.session import SessionOptions, declare_publisher, loopback_options, open_session
@@ -224,6 +231,7 @@ def _fail(group: ProcessGroup, child: Child, what: str) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
+    stop_on_sigterm()
     if args.hil:  # the hardware stack with emulated devices: hwbridge/hil.py
         from hwbridge import hil
 
@@ -305,10 +313,11 @@ def run(args: argparse.Namespace) -> int:
             except Exception:
                 pass
             group.stop_all()
-    except KeyboardInterrupt:
-        print("\nbtrack sim: interrupted; stopping every process", file=sys.stderr)
+    except KeyboardInterrupt as exc:
+        code, word = interrupted_code(exc)
+        print(f"\nbtrack sim: {word}; stopping every process", file=sys.stderr)
         group.stop_all()
-        return 130
+        return code
     finally:
         group.stop_all()
     wall = time.monotonic() - t_wall0

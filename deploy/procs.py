@@ -15,6 +15,29 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the launcher is, so it ends its children as on Ctrl-C."""
+
+
+def _raise_terminated(signum: int, frame: object) -> None:
+    raise Terminated()
+
+
+def stop_on_sigterm() -> None:
+    """Make SIGTERM (``kill PID``, ``timeout``, a service manager) end a launcher the way
+    Ctrl-C does: through its ``except KeyboardInterrupt``, which stops every child.
+    Without it the launcher dies at once and its children, in their own sessions,
+    run on."""
+    signal.signal(signal.SIGTERM, _raise_terminated)
+
+
+def interrupted_code(exc: KeyboardInterrupt) -> tuple[int, str]:
+    """Exit code and word for a launcher stopped by Ctrl-C or by SIGTERM."""
+    if isinstance(exc, Terminated):
+        return 128 + signal.SIGTERM, "terminated"
+    return 128 + signal.SIGINT, "interrupted"
+
+
 def free_port() -> int:
     """A TCP port on loopback that was free a moment ago."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from deploy.procs import interrupted_code, stop_on_sigterm
 from report.thesis import MAPS, STARTS, all_cases
 
 DEFAULT_DURATION_S = 1200.0
@@ -173,11 +174,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"btrack suite thesis: {len(cases)} cases of {args.duration:g} s, {args.jobs} "
               f"at once -> {out}", flush=True)
     began = time.monotonic()
+    stop_on_sigterm()
     try:
         summaries = run_cases(args, cases)
-    except KeyboardInterrupt:
-        print("\nbtrack suite: interrupted; every case stopped", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        code, word = interrupted_code(exc)
+        print(f"\nbtrack suite: {word}; every case stopped", file=sys.stderr)
+        return code
     wall = time.monotonic() - began
 
     from report.suite import write_suite_report

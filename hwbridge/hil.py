@@ -22,7 +22,7 @@ from typing import Any
 
 import zenoh
 
-from deploy.procs import Child, ProcessGroup, free_port
+from deploy.procs import Child, ProcessGroup, free_port, interrupted_code
 from simworld.maps import MapError, load_map
 from wire import Keys
 from wire.session import SessionOptions, open_session
@@ -178,10 +178,11 @@ def run(args: argparse.Namespace) -> int:
             for child in (*agents, *bridges, lms):  # before the devices go away
                 group.stop(child)
             group.stop_all()
-    except KeyboardInterrupt:
-        print("\nbtrack sim --hil: interrupted; stopping every process", file=sys.stderr)
+    except KeyboardInterrupt as exc:
+        code, word = interrupted_code(exc)
+        print(f"\nbtrack sim --hil: {word}; stopping every process", file=sys.stderr)
         group.stop_all()
-        return 130
+        return code
     finally:
         group.stop_all()
     wall = time.monotonic() - began

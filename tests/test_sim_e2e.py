@@ -55,7 +55,8 @@ def test_run_leaves_recording_report_and_no_process(half_algae_run):
     assert not [name for name, pid in pids.items() if pid_alive(pid)]
 
 
-def test_ctrl_c_stops_every_process(tmp_path):
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["ctrl-c", "sigterm"])
+def test_ctrl_c_or_sigterm_stops_every_process(tmp_path, sig):
     out = tmp_path / "interrupted"
     proc = subprocess.Popen(
         [sys.executable, "-m", "btrack", "sim", "--out", str(out), "--quiet",
@@ -74,8 +75,8 @@ def test_ctrl_c_stops_every_process(tmp_path):
         lockstep = os.getpriority(os.PRIO_PROCESS, pids["world"])
         assert os.getpriority(os.PRIO_PROCESS, pids["agent1"]) == lockstep
         assert os.getpriority(os.PRIO_PROCESS, pids["recorder"]) > lockstep
-        os.kill(proc.pid, signal.SIGINT)
-        assert proc.wait(30) == 130
+        os.kill(proc.pid, sig)
+        assert proc.wait(30) == 128 + sig
         assert not [name for name, pid in pids.items() if pid_alive(pid)]
     finally:
         end(proc)

@@ -4,8 +4,11 @@ full multi-process team; the files it writes and the shape of the thesis's table
 from __future__ import annotations
 
 import json
+import os
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 from report.summary import KEYS
@@ -71,3 +74,29 @@ def test_short_suite_writes_tables_summary_and_every_case(tmp_path: Path) -> Non
             assert (case / name).exists(), case / name
         pids = json.loads((case / "logs" / "pids.json").read_text())
         assert not [n for n, pid in pids.items() if pid_alive(pid)]
+
+
+def test_sigterm_stops_the_suite_and_every_process_of_its_cases(tmp_path: Path) -> None:
+    out = tmp_path / "suite"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "btrack", "suite", "thesis", "--out", str(out),
+         "--duration", "100000", "--maps", "no-algae", "--starts", "in-phase", "--jobs", "1",
+         "--localization", "truth", "--quiet"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+    )
+    case = out / "no-algae_in-phase"
+    pids_file = case / "logs" / "pids.json"
+    try:
+        deadline = time.monotonic() + 60
+        while not (pids_file.exists() and "world" in pids_file.read_text()):
+            assert proc.poll() is None, proc.communicate()[1]
+            assert time.monotonic() < deadline, "the case's world never started"
+            time.sleep(0.1)
+        pids = json.loads(pids_file.read_text())
+        os.kill(proc.pid, signal.SIGTERM)
+        assert proc.wait(60) == 128 + signal.SIGTERM
+        assert "terminated" in proc.communicate()[1]
+        assert not [name for name, pid in pids.items() if pid_alive(pid)]
+    finally:
+        end(proc)
+        end_children_of_run(case)
