@@ -108,7 +108,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--odom-noise",
         type=float,
         default=0.02,
-        help="odometry noise, std as a fraction of distance and turn (0.02)",
+        help="odometry noise: std of each step's distance, as a fraction of it (0.02)",
+    )
+    p.add_argument(
+        "--odom-turn-noise",
+        type=float,
+        help="std of each step's turn, as a fraction of it (default: --odom-noise); "
+        "a robot with a gyro for its heading has far less than its wheels give",
     )
     p.add_argument("--realtime", action="store_true", help="pace ticks on the wall clock")
     p.add_argument(
@@ -451,10 +457,11 @@ def _check_args(args: argparse.Namespace) -> str | None:
         return "--team must be between 1 and --robots"
     if not args.dt > 0 or not args.duration > 0:
         return "--dt and --duration must be positive"
-    if min(args.odom_noise, args.cmd_timeout, args.startup_timeout, args.settle,
+    turn_noise = args.odom_noise if args.odom_turn_noise is None else args.odom_turn_noise
+    if min(args.odom_noise, turn_noise, args.cmd_timeout, args.startup_timeout, args.settle,
            args.hold_timeout) < 0:
-        return ("--odom-noise, --cmd-timeout, --startup-timeout, --settle and "
-                "--hold-timeout must be >= 0")
+        return ("--odom-noise, --odom-turn-noise, --cmd-timeout, --startup-timeout, --settle "
+                "and --hold-timeout must be >= 0")
     if args.laser_noise < 0:
         return "--laser-noise must be >= 0"
     try:
@@ -483,7 +490,8 @@ def main(argv: list[str] | None = None) -> int:
     except MapError as exc:
         print(f"btrack world: {exc}", file=sys.stderr)
         return 2
-    world = World(gmap, args.robots, args.start, args.seed, args.odom_noise, args.team)
+    world = World(gmap, args.robots, args.start, args.seed, args.odom_noise, args.team,
+                  odom_turn_noise=args.odom_turn_noise)
     total = round(args.duration / args.dt)
 
     with bounded_session(options_from_args(args), "btrack world") as session:

@@ -85,16 +85,19 @@ class World:
         seed: int = 1,
         odom_noise: float = 0.02,
         team: int | None = None,
+        odom_turn_noise: float | None = None,
     ) -> None:
         team = n if team is None else team
         if not 1 <= team <= n:
             raise ValueError("need at least one robot, and a starting team of 1 to n")
-        if odom_noise < 0:
+        turn_noise = odom_noise if odom_turn_noise is None else odom_turn_noise
+        if odom_noise < 0 or turn_noise < 0:
             raise ValueError("odometry noise must be >= 0")
         self.map = gmap
         self.n = n
         self.start = start
-        self.odom_noise = odom_noise
+        self.odom_noise = odom_noise  # std of the distance, as a fraction of it
+        self.odom_turn_noise = turn_noise  # std of the turn, as a fraction of it
         self._rng = np.random.default_rng(seed)
         poses = start_poses(gmap, team, start) + (parked_poses(gmap, n - team) if n > team else [])
         self._x = [p[0] for p in poses]
@@ -129,7 +132,7 @@ class World:
 
     def step(self, cmds: dict[int, tuple[float, float]], dt: float) -> None:
         """Drive every robot for ``dt`` at its command (zero if it has none)."""
-        noise = self.odom_noise
+        noise, turn_noise = self.odom_noise, self.odom_turn_noise
         draws = self._rng.standard_normal(2 * self.n).tolist()
         for i in range(self.n):
             v, omega = cmds.get(i, (0.0, 0.0))
@@ -139,7 +142,7 @@ class World:
                 self._x[i], self._y[i], self._th[i], dist, dtheta
             )
             odist = dist + noise * abs(dist) * draws[2 * i]
-            odth = dtheta + noise * abs(dtheta) * draws[2 * i + 1]
+            odth = dtheta + turn_noise * abs(dtheta) * draws[2 * i + 1]
             self._odom_d[i], self._odom_dth[i] = odist, odth
             self._ox[i], self._oy[i], self._oth[i] = integrate_arc(
                 self._ox[i], self._oy[i], self._oth[i], odist, odth
@@ -157,6 +160,8 @@ class World:
             "robot_radius": ROBOT_RADIUS_M,
             "min_depth": MIN_DEPTH_M,
             "margin_out": MARGIN_OUT_M,
+            "odom_noise": self.odom_noise,
+            "odom_turn_noise": self.odom_turn_noise,
         }
 
 

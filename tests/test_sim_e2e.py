@@ -109,3 +109,30 @@ def test_the_same_seed_gives_the_same_run_even_side_by_side(tmp_path):
         assert a.t.size == b.t.size == 400
         assert (a.x == b.x).all() and (a.y == b.y).all() and (a.theta == b.theta).all()
         assert (runs[0].states[i].phase == runs[1].states[i].phase).all()
+
+
+def test_odometry_noise_from_the_command_line_reaches_the_world_and_the_summary(tmp_path):
+    # a gyro-grade heading (no turn noise) with noisy wheels: the poses the agents were
+    # given keep the true heading but not the true position
+    out = tmp_path / "gyro"
+    result = run_sim(out, "--robots", "2", "--map", "no-algae", "--localization", "odometry",
+                     "--odom-noise", "0.05", "--odom-turn-noise", "0", "--duration", "30",
+                     timeout=180)
+    assert result.returncode == 0, result.stderr[-3000:]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["odom_noise"] == 0.05 and summary["odom_turn_noise"] == 0.0
+    from report.load import load_run
+
+    run = load_run(out / "run.mcap")
+    for i in (0, 1):
+        pose, truth = run.poses[i], run.truth[i]
+        n = min(pose.t.size, truth.t.size)
+        assert n >= 290 and (pose.t[:n] == truth.t[:n]).all()
+        assert abs(pose.theta[:n] - truth.theta[:n]).max() < 1e-9
+        assert abs(pose.x[:n] - truth.x[:n]).max() > 1e-4
+
+
+def test_sim_refuses_a_negative_odometry_noise(tmp_path):
+    result = run_sim(tmp_path / "bad", "--odom-turn-noise", "-0.1", timeout=60)
+    assert result.returncode == 2
+    assert "must be >= 0" in result.stderr and "Traceback" not in result.stderr

@@ -230,6 +230,22 @@ def test_world_odometry_and_sensing() -> None:
     assert noisy.odometry_pose(0) != pytest.approx(noisy.truth(0), abs=1e-6)
 
 
+def test_world_odometry_turn_noise_apart_from_distance_noise() -> None:
+    m = builtin_map("half-algae")
+    gyro = World(m, 1, odom_noise=0.05, odom_turn_noise=0.0)  # wheels noisy, heading exact
+    wheels = World(m, 1, odom_noise=0.0, odom_turn_noise=0.05)  # distance exact, turns noisy
+    for _ in range(50):
+        gyro.step({0: (0.3, 0.6)}, 0.1)
+        wheels.step({0: (0.3, 0.6)}, 0.1)
+    assert gyro.odometry_pose(0)[2] == pytest.approx(gyro.truth(0)[2], abs=1e-12)
+    assert gyro.odometry_pose(0)[:2] != pytest.approx(gyro.truth(0)[:2], abs=1e-6)
+    assert wheels.odometry_pose(0)[2] != pytest.approx(wheels.truth(0)[2], abs=1e-6)
+    assert wheels.info()["odom_noise"] == 0.0 and wheels.info()["odom_turn_noise"] == 0.05
+    assert World(m, 1, odom_noise=0.03).odom_turn_noise == 0.03  # one noise for both
+    with pytest.raises(ValueError, match="noise"):
+        World(m, 1, odom_turn_noise=-0.1)
+
+
 def test_start_placement() -> None:
     m = builtin_map("no-algae")
     inphase = start_poses(m, 3, "in-phase")

@@ -201,6 +201,8 @@ class WorldInfo:
     min_depth: float
     margin_out: float
     realtime: bool = False
+    odom_noise: float = 0.02  # odometry std, fraction of each step's distance
+    odom_turn_noise: float = 0.02  # and of each step's turn
 
     def check(self) -> None:
         _require(self.edge_lo < self.edge_hi and self.bin_m > 0, "bad edge or bin")
