@@ -116,3 +116,17 @@ def wait_for(cond: Callable[[], bool], timeout: float, what: str) -> None:
 
 __all__ = ["end", "end_children_of_run", "free_port", "hub_session", "kill_pid", "member_args",
            "pid_alive", "run_sim", "start", "unique_ns", "wait_for"]
+
+
+def wait_for_world(run_dir: Path, launcher: subprocess.Popen[str], timeout_s: float = 60
+                   ) -> dict[str, int]:
+    """The pids a launcher recorded in RUN_DIR/logs/pids.json, once its world is started;
+    fails at once if the launcher ends first."""
+    pids_file = run_dir / "logs" / "pids.json"
+    deadline = time.monotonic() + timeout_s
+    while not (pids_file.exists() and "world" in pids_file.read_text()):
+        assert launcher.poll() is None, launcher.communicate()[1]
+        assert time.monotonic() < deadline, f"no world started in {run_dir}"
+        time.sleep(0.1)
+    pids: dict[str, int] = json.loads(pids_file.read_text())
+    return pids

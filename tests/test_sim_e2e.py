@@ -8,11 +8,10 @@ import os
 import signal
 import subprocess
 import sys
-import time
 
 import pytest
 
-from tests.procutil import end, end_children_of_run, pid_alive, run_sim
+from tests.procutil import end, end_children_of_run, pid_alive, run_sim, wait_for_world
 
 SUMMARY_KEYS = {
     "map", "start", "robots", "localization", "seed", "duration_s", "speedup", "phase_sse_rad",
@@ -63,14 +62,8 @@ def test_ctrl_c_or_sigterm_stops_every_process(tmp_path, sig):
          "--duration", "100000", "--no-report"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
     )
-    pids_file = out / "logs" / "pids.json"
     try:
-        deadline = time.monotonic() + 60
-        while not (pids_file.exists() and "world" in pids_file.read_text()):
-            assert proc.poll() is None, proc.communicate()[1]
-            assert time.monotonic() < deadline, "the world never started"
-            time.sleep(0.1)
-        pids = json.loads(pids_file.read_text())
+        pids = wait_for_world(out, proc)
         # the recorder (the team's router) is off the lockstep's path: it yields the cores
         lockstep = os.getpriority(os.PRIO_PROCESS, pids["world"])
         assert os.getpriority(os.PRIO_PROCESS, pids["agent1"]) == lockstep

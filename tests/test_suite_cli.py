@@ -8,12 +8,11 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 from report.summary import KEYS
 from report.thesis import START_HEADINGS
-from tests.procutil import end, end_children_of_run, pid_alive
+from tests.procutil import end, end_children_of_run, pid_alive, wait_for_world
 
 
 def test_short_suite_writes_tables_summary_and_every_case(tmp_path: Path) -> None:
@@ -85,14 +84,8 @@ def test_sigterm_stops_the_suite_and_every_process_of_its_cases(tmp_path: Path) 
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
     )
     case = out / "no-algae_in-phase"
-    pids_file = case / "logs" / "pids.json"
     try:
-        deadline = time.monotonic() + 60
-        while not (pids_file.exists() and "world" in pids_file.read_text()):
-            assert proc.poll() is None, proc.communicate()[1]
-            assert time.monotonic() < deadline, "the case's world never started"
-            time.sleep(0.1)
-        pids = json.loads(pids_file.read_text())
+        pids = wait_for_world(case, proc)
         os.kill(proc.pid, signal.SIGTERM)
         assert proc.wait(60) == 128 + signal.SIGTERM
         assert "terminated" in proc.communicate()[1]
