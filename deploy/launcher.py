@@ -28,7 +28,7 @@ from deploy.procs import (
     Child,
     ProcessGroup,
     free_port,
-    interrupted_code,
+    stop_interrupted,
     stop_on_sigterm,
     wait_listening,
 )
@@ -326,10 +326,7 @@ def run(args: argparse.Namespace) -> int:
                 pass
             group.stop_all()
     except KeyboardInterrupt as exc:
-        code, word = interrupted_code(exc)
-        print(f"\nbtrack sim: {word}; stopping every process", file=sys.stderr)
-        group.stop_all()
-        return code
+        return stop_interrupted(group, exc, "btrack sim")
     finally:
         group.stop_all()
     wall = time.monotonic() - t_wall0

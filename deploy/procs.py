@@ -38,6 +38,14 @@ def interrupted_code(exc: KeyboardInterrupt) -> tuple[int, str]:
     return 128 + signal.SIGINT, "interrupted"
 
 
+def stop_interrupted(group: ProcessGroup, exc: KeyboardInterrupt, who: str) -> int:
+    """Say why ``who`` stops, end every child of ``group``; the exit code (130 or 143)."""
+    code, word = interrupted_code(exc)
+    print(f"\n{who}: {word}; stopping every process", file=sys.stderr)
+    group.stop_all()
+    return code
+
+
 def free_port() -> int:
     """A TCP port on loopback that was free a moment ago."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:

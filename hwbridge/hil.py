@@ -22,7 +22,7 @@ from typing import Any
 
 import zenoh
 
-from deploy.procs import Child, ProcessGroup, free_port, interrupted_code
+from deploy.procs import Child, ProcessGroup, free_port, stop_interrupted
 from simworld.maps import MapError, load_map
 from wire import Keys
 from wire.session import SessionOptions, open_session
@@ -179,10 +179,7 @@ def run(args: argparse.Namespace) -> int:
                 group.stop(child)
             group.stop_all()
     except KeyboardInterrupt as exc:
-        code, word = interrupted_code(exc)
-        print(f"\nbtrack sim --hil: {word}; stopping every process", file=sys.stderr)
-        group.stop_all()
-        return code
+        return stop_interrupted(group, exc, "btrack sim --hil")
     finally:
         group.stop_all()
     wall = time.monotonic() - began
