@@ -25,9 +25,12 @@ from agent.controller import Gains
 from agent.stability import check_gains
 from deploy import faults
 from deploy.procs import (
+    ODOM_FLAGS,
     Child,
     ProcessGroup,
+    forward_flags,
     free_port,
+    non_negative,
     stop_interrupted,
     stop_on_sigterm,
     wait_listening,
@@ -56,10 +59,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--localization", choices=["pf", "truth", "odometry"], default="pf",
                    help="where agents' poses come from: pf (the localizer's particle "
                    "filters on laser scans), truth or odometry (default pf)")
-    p.add_argument("--odom-noise", type=float, metavar="F",
+    p.add_argument("--odom-noise", type=non_negative, metavar="F",
                    help="wheel odometry noise: std of each step's distance as a fraction "
                    "of it (the world's default, 0.02)")
-    p.add_argument("--odom-turn-noise", type=float, metavar="F",
+    p.add_argument("--odom-turn-noise", type=non_negative, metavar="F",
                    help="std of each step's turn as a fraction of it (default: --odom-noise; "
                    "a gyro-aided heading has far less)")
     p.add_argument("--duration", type=float, default=900.0, help="simulated seconds (900)")
@@ -248,9 +251,6 @@ def run(args: argparse.Namespace) -> int:
     if problems:
         print("btrack sim: unstable gains: " + "; ".join(problems), file=sys.stderr)
         return 2
-    if min(args.odom_noise or 0.0, args.odom_turn_noise or 0.0) < 0:
-        print("btrack sim: --odom-noise and --odom-turn-noise must be >= 0", file=sys.stderr)
-        return 2
     try:
         schedule, bodies = _schedule(args)
     except faults.FaultSpecError as exc:
@@ -313,9 +313,7 @@ def run(args: argparse.Namespace) -> int:
                     world_args += ["--hold-at", str(f.at_s)]
             for spec in args.kidnap:
                 world_args += ["--kidnap", spec]
-            for flag in ("odom_noise", "odom_turn_noise"):
-                if getattr(args, flag) is not None:
-                    world_args += ["--" + flag.replace("_", "-"), str(getattr(args, flag))]
+            world_args += forward_flags(args, ODOM_FLAGS)
             world = group.start("world", world_args)
             code = _watch(args, group, monitor, world, injector, recorder, vital)
             if code:

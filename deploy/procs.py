@@ -4,6 +4,7 @@ ended by their own process id."""
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import signal
@@ -44,6 +45,30 @@ def stop_interrupted(group: ProcessGroup, exc: KeyboardInterrupt, who: str) -> i
     print(f"\n{who}: {word}; stopping every process", file=sys.stderr)
     group.stop_all()
     return code
+
+
+ODOM_FLAGS = ("odom_noise", "odom_turn_noise")  # sim and suite pass them on to the world
+
+
+def non_negative(text: str) -> float:
+    """An argparse type: a float >= 0 (a noise), refused with the value at fault."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not value >= 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
+    return value
+
+
+def forward_flags(args: argparse.Namespace, names: tuple[str, ...]) -> list[str]:
+    """The options ``names`` that were given, as command-line flags for a child."""
+    out: list[str] = []
+    for name in names:
+        value = getattr(args, name)
+        if value is not None:
+            out += ["--" + name.replace("_", "-"), repr(value)]
+    return out
 
 
 def free_port() -> int:

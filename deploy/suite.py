@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from deploy.procs import interrupted_code, stop_on_sigterm
+from deploy.procs import ODOM_FLAGS, forward_flags, interrupted_code, non_negative, stop_on_sigterm
 from report.thesis import MAPS, STARTS, all_cases
 
 DEFAULT_DURATION_S = 1200.0
@@ -65,9 +65,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--starts", nargs="+", choices=STARTS, default=list(STARTS),
                    help="only these starts (default: all four)")
     p.add_argument("--config", metavar="FILE.toml", help="agent configuration for every case")
-    p.add_argument("--odom-noise", type=float, metavar="F",
+    p.add_argument("--odom-noise", type=non_negative, metavar="F",
                    help="wheel odometry noise for every case, as for btrack sim")
-    p.add_argument("--odom-turn-noise", type=float, metavar="F",
+    p.add_argument("--odom-turn-noise", type=non_negative, metavar="F",
                    help="odometry turn noise for every case, as for btrack sim")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     return p
@@ -85,10 +85,7 @@ def _sim_args(args: argparse.Namespace, case: Case) -> list[str]:
         out += ["--localization", args.localization]
     if args.config:
         out += ["--config", args.config]
-    for flag in ("odom_noise", "odom_turn_noise"):
-        if getattr(args, flag) is not None:
-            out += ["--" + flag.replace("_", "-"), repr(getattr(args, flag))]
-    return out
+    return out + forward_flags(args, ODOM_FLAGS)
 
 
 def _start(args: argparse.Namespace, case: Case) -> None:
@@ -173,9 +170,6 @@ def main(argv: list[str] | None = None) -> int:
         print("btrack suite: --jobs must be at least 1 and --duration positive",
               file=sys.stderr)
         return 2
-    if min(args.odom_noise or 0.0, args.odom_turn_noise or 0.0) < 0:
-        print("btrack suite: --odom-noise and --odom-turn-noise must be >= 0", file=sys.stderr)
-        return 2
     out: Path = args.out or Path("runs") / time.strftime("suite-%Y%m%d-%H%M%S")
     out.mkdir(parents=True, exist_ok=True)
     wanted = [(m, s) for m, s in all_cases() if m in args.maps and s in args.starts]
@@ -200,9 +194,7 @@ def main(argv: list[str] | None = None) -> int:
         "duration_s": args.duration, "seed": args.seed, "jobs": args.jobs,
         "wall_s": round(wall, 1),
     }
-    for flag in ("odom_noise", "odom_turn_noise"):
-        if getattr(args, flag) is not None:
-            settings[flag] = getattr(args, flag)
+    settings.update({f: getattr(args, f) for f in ODOM_FLAGS if getattr(args, f) is not None})
     below = write_suite_report(out, summaries, settings)
     failed = [s for s in summaries if "error" in s]
     if not args.quiet:

@@ -114,10 +114,6 @@ def wait_for(cond: Callable[[], bool], timeout: float, what: str) -> None:
         time.sleep(0.02)
 
 
-__all__ = ["end", "end_children_of_run", "free_port", "hub_session", "kill_pid", "member_args",
-           "pid_alive", "run_sim", "start", "unique_ns", "wait_for"]
-
-
 def wait_for_world(run_dir: Path, launcher: subprocess.Popen[str], timeout_s: float = 60
                    ) -> dict[str, int]:
     """The pids a launcher recorded in RUN_DIR/logs/pids.json, once its world is started;
@@ -130,3 +126,8 @@ def wait_for_world(run_dir: Path, launcher: subprocess.Popen[str], timeout_s: fl
         time.sleep(0.1)
     pids: dict[str, int] = json.loads(pids_file.read_text())
     return pids
+
+
+__all__ = ["end", "end_children_of_run", "free_port", "hub_session", "kill_pid", "member_args",
+           "pid_alive", "run_sim", "start", "unique_ns", "wait_for", "wait_for_world"]
+
