@@ -49,16 +49,26 @@ def shared_boundary(
 
 
 def join_segment(
-    lower: SegmentView | None, upper: SegmentView | None, edge_lo: float, edge_hi: float
+    lower: SegmentView | None, upper: SegmentView | None, edge_lo: float, edge_hi: float,
+    *, lower_unheard: bool = False, upper_unheard: bool = False,
 ) -> tuple[float, float]:
     """The first claim of a robot that joins a running team (a restart, or a new id)
     between live neighbours ``lower`` and ``upper`` (None at an end of the chain): from
     the middle of the lower neighbour's segment to the middle of the upper one's. Each
     neighbour then meets it halfway (``shared_boundary``), so it starts with a quarter
     of each neighbour's segment and workload balance evens the rest out; no robot
-    restarts. With no neighbour heard it claims the whole edge."""
+    restarts. With no neighbour heard it claims the whole edge.
+
+    A side whose neighbour is alive but not heard (``lower_unheard``/``upper_unheard``,
+    its view None) is not an end of the chain: the claim stops at the heard neighbour's
+    far boundary on that side (the half of its segment next to the unheard robot), so it
+    never runs past a live robot to the end of the edge."""
     lo = edge_lo if lower is None else 0.5 * (lower.lo + lower.hi)
     hi = edge_hi if upper is None else 0.5 * (upper.lo + upper.hi)
+    if lower is None and lower_unheard and upper is not None:
+        lo = upper.lo
+    if upper is None and upper_unheard and lower is not None:
+        hi = lower.hi
     if not lo < hi:  # neighbours' claims out of order: split what lies between them
         lo, hi = min(lo, hi), max(lo, hi)
     return lo, hi

@@ -199,12 +199,24 @@ class AgentNode:
         """Equal initial segments when the team starts together (tick 0, or no
         neighbour heard); otherwise a share of the live neighbours' segments."""
         lower_id, upper_id = self.neighbours()
-        views = [self._neighbour_view(rid, k) for rid in (lower_id, upper_id)]
+        views = [self._latest_segment(rid, k) for rid in (lower_id, upper_id)]
         if k == 0 or all(v is None for v in views):
             return initial_segment(self.robot, self.team, edge_lo, edge_hi)
-        lower, upper = (None if v is None else SegmentView(v.lo, v.hi, v.workload)
-                        for v in views)
-        return join_segment(lower, upper, edge_lo, edge_hi)
+        return join_segment(views[0], views[1], edge_lo, edge_hi,
+                            lower_unheard=lower_id is not None and views[0] is None,
+                            upper_unheard=upper_id is not None and views[1] is None)
+
+    def _latest_segment(self, rid: int | None, k: int) -> SegmentView | None:
+        """A neighbour's latest state of tick k or before, as a segment: what an agent
+        joining a running team claims a share of. Its state of tick k itself counts:
+        under load a quicker neighbour's state of the tick being decided can be the
+        first one heard of it."""
+        hist = {} if rid is None else self.states.get(rid, {})
+        ks = [kk for kk in hist if kk <= k]
+        if not ks:
+            return None
+        s = hist[max(ks)]
+        return SegmentView(s.lo, s.hi, s.workload)
 
     def _neighbours_ready(self, k: int) -> bool:
         """Whether every neighbour's state of tick k-1 is here; on the wall clock, where
@@ -280,7 +292,7 @@ class AgentNode:
                 # Keep a running neighbour deadline: with hardware, tick k+1's Sense often
                 # comes before tick k's Pose, and resetting here would wait forever.
                 continue
-            if self.controller is None and k > 0 and self._wait_to_join():
+            if self.controller is None and k > 0 and self._wait_to_join(k):
                 self._stand_still(k)  # joining a running team: claim once we hear them
                 continue
             ready = self._neighbours_ready(k) if k > 0 else self._team_heard()
@@ -292,11 +304,16 @@ class AgentNode:
             deadline = None
             self._tick(k)
 
-    def _wait_to_join(self) -> bool:
-        """Whether to stand still rather than claim a segment now: some live neighbour's
-        state is not here yet, and we have stood still for less than JOIN_WAIT_S (a
-        team starting together on the wall clock has nobody publishing yet)."""
-        if all(rid is None or self.states.get(rid) for rid in self.neighbours()):
+    def _wait_to_join(self, k: int) -> bool:
+        """Whether to stand still rather than claim a segment at tick k of a running
+        team: we know of no other live agent yet (the liveliness history of a session
+        that has just linked up can come after its first Sense: acting then, a restarted
+        agent would think itself alone and claim the whole edge), or some live
+        neighbour's state (of tick k or before) is not here yet; and we have stood still
+        for less than JOIN_WAIT_S (a team starting together on the wall clock has nobody
+        publishing yet; an agent really alone claims the edge after it)."""
+        heard = all(rid is None or self._latest_segment(rid, k) for rid in self.neighbours())
+        if self.live and heard:
             return False
         now = time.monotonic()
         if self.join_deadline is None:

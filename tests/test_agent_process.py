@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import queue
+import time
 
 import msgpack
 import pytest
@@ -27,6 +28,13 @@ def neighbour_state(robot: int, k: int, lo: float, hi: float) -> AgentState:
     return AgentState(t=k * 0.1, k=k, robot=robot, lo=lo, hi=hi, phase=0.1, phase_des=0.1,
                       workload=0.6, depth_avg=0.3, direction=1, lower=-1 if robot == 0 else 1,
                       upper=-1 if robot == 2 else 1, edge_lo=0.0, edge_hi=6.0)
+
+
+def sense_and_pose(session: zenoh.Session, keys: Keys, k: int, x: float = 3.0) -> None:
+    """The world's part of tick k for robot 1: its Sense, then its Pose."""
+    session.put(keys.sense(1), encode(Sense(k * 0.1, k, 1, False, False, 0.0, 0.0, 0.0, 6.0,
+                                            0.1)))
+    session.put(keys.pose(1), encode(Pose(k * 0.1, k, 1, x, -1.0, math.pi / 2)))
 
 
 def test_agent_survives_garbage_and_counts_it(bus, tmp_path):
@@ -54,9 +62,7 @@ def test_agent_survives_garbage_and_counts_it(bus, tmp_path):
             if k > 0:  # the neighbours' states of the previous tick
                 pub0.put(encode(neighbour_state(0, k - 1, 0.0, 2.0)))
                 pub2.put(encode(neighbour_state(2, k - 1, 4.0, 6.0)))
-            session.put(keys.sense(1), encode(Sense(k * 0.1, k, 1, False, False, 0.0, 0.0,
-                                                    0.0, 6.0, 0.1)))
-            session.put(keys.pose(1), encode(Pose(k * 0.1, k, 1, 2.05, -1.0, math.pi / 2)))
+            sense_and_pose(session, keys, k, x=2.05)
             cmd = cmds.get(timeout=10)
             state = states.get(timeout=10)
             assert cmd.k == k and state.k == k
@@ -88,6 +94,76 @@ def test_agent_survives_garbage_and_counts_it(bus, tmp_path):
         end(proc)
         for tok in tokens:
             tok.undeclare()
+    assert proc.returncode == 0, (tmp_path / "agent.log").read_text()
+
+
+def test_agent_restarted_in_a_running_team_claims_between_its_neighbours(bus, tmp_path):
+    """An agent (re)started mid-run stands still until it has heard both live
+    neighbours, then claims from the middle of the lower one's segment to the middle of
+    the upper one's. Under load a neighbour's state of the very tick the joiner is on
+    can be the first it hears of it (that neighbour was quicker): it counts as heard,
+    and the claim never runs past it to the end of the edge."""
+    ns, port, session = bus
+    keys = Keys(ns)
+    states: queue.SimpleQueue[AgentState] = queue.SimpleQueue()
+    cmds: queue.SimpleQueue[Cmd] = queue.SimpleQueue()
+    session.declare_subscriber(
+        keys.state(1), lambda s: states.put(decode(AgentState, s.payload.to_bytes()))
+    )
+    session.declare_subscriber(keys.cmd(1), lambda s: cmds.put(decode(Cmd, s.payload.to_bytes())))
+    alive: queue.SimpleQueue[str] = queue.SimpleQueue()
+    session.liveliness().declare_subscriber(keys.alive(1), lambda s: alive.put(str(s.kind)))
+    tokens = [session.liveliness().declare_token(keys.alive(i)) for i in (0, 2)]
+    proc = start(["agent", "--id", "1", "--robots", "3", "--neighbour-timeout", "0.3",
+                  *member_args(ns, port)], tmp_path / "agent.log")
+
+    try:
+        alive.get(timeout=30)
+        sense_and_pose(session, keys, 500)  # a running team's tick; no neighbour heard yet
+        cmd = cmds.get(timeout=10)
+        assert (cmd.k, cmd.v, cmd.omega) == (500, 0.0, 0.0)  # standing still
+        assert states.empty()
+        # Tick 501: robot 0 was quick and its state of 501 itself is here; robot 2's of 500.
+        session.put(keys.state(0), encode(neighbour_state(0, 501, 0.0, 2.0)))
+        session.put(keys.state(2), encode(neighbour_state(2, 500, 3.0, 6.0)))
+        sense_and_pose(session, keys, 501)
+        state = states.get(timeout=10)
+        assert state.k == 501 and (state.lower, state.upper) == (0, 2)
+        assert (state.lo, state.hi) == pytest.approx((1.0, 4.5))
+    finally:
+        end(proc)
+        for tok in tokens:
+            tok.undeclare()
+    assert proc.returncode == 0, (tmp_path / "agent.log").read_text()
+
+
+def test_agent_restarted_hearing_nobody_yet_stands_still_before_claiming_alone(bus, tmp_path):
+    """A restarted agent's first Sense can come before it has heard who is alive. It
+    stands still rather than claim the whole edge at once; only after JOIN_WAIT_S
+    (1 s) with nobody heard does it take the edge as a team of one."""
+    ns, port, session = bus
+    keys = Keys(ns)
+    states: queue.SimpleQueue[AgentState] = queue.SimpleQueue()
+    cmds: queue.SimpleQueue[Cmd] = queue.SimpleQueue()
+    session.declare_subscriber(
+        keys.state(1), lambda s: states.put(decode(AgentState, s.payload.to_bytes()))
+    )
+    session.declare_subscriber(keys.cmd(1), lambda s: cmds.put(decode(Cmd, s.payload.to_bytes())))
+    alive: queue.SimpleQueue[str] = queue.SimpleQueue()
+    session.liveliness().declare_subscriber(keys.alive(1), lambda s: alive.put(str(s.kind)))
+    proc = start(["agent", "--id", "1", "--robots", "3", *member_args(ns, port)],
+                 tmp_path / "agent.log")
+    try:
+        alive.get(timeout=30)
+        for k in (500, 501):
+            sense_and_pose(session, keys, k)
+            assert (cmds.get(timeout=10).v, states.empty()) == (0.0, True)
+        time.sleep(1.2)  # past JOIN_WAIT_S, and still nobody alive
+        sense_and_pose(session, keys, 502)
+        state = states.get(timeout=10)
+        assert (state.k, state.lower, state.upper, state.lo, state.hi) == (502, -1, -1, 0.0, 6.0)
+    finally:
+        end(proc)
     assert proc.returncode == 0, (tmp_path / "agent.log").read_text()
 
 

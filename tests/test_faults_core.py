@@ -71,6 +71,16 @@ def test_joining_robot_takes_a_quarter_of_each_neighbour_and_they_agree():
     assert join_segment(None, None, 0.0, 6.0) == (0.0, 6.0)
 
 
+def test_joining_robot_never_claims_past_a_live_neighbour_it_has_not_heard():
+    lower, upper = SegmentView(0.0, 3.0, 1.5), SegmentView(3.0, 6.0, 1.5)
+    # robot 0 alive but unheard: the half of robot 2's segment next to it, not [0, 4.5]
+    assert join_segment(None, upper, 0.0, 6.0, lower_unheard=True) == (3.0, 4.5)
+    assert join_segment(lower, None, 0.0, 6.0, upper_unheard=True) == (1.5, 3.0)
+    # a heard neighbour on that side, or a real end of the chain, as before
+    assert join_segment(lower, upper, 0.0, 6.0, lower_unheard=True) == (1.5, 4.5)
+    assert join_segment(None, upper, 0.0, 6.0) == (0.0, 4.5)
+
+
 def test_segment_union_measures_gap_and_overlap():
     lo, hi = np.array([0.0, 2.0, 4.5]), np.array([2.0, 4.0, 6.0])
     assert segment_union(lo, hi, 0.0, 6.0) == pytest.approx((0.5, 0.0))
