@@ -21,6 +21,7 @@ test: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/mypy agent wire localizer hwbridge deploy report recorder simworld btrack
+	$(BIN)/mypy bench  # apart: bench/localizer.py would clash with the localizer package
 
 bench: $(STAMP)
 	$(BIN)/python bench/speed.py

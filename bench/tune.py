@@ -1,0 +1,185 @@
+"""The thesis's twelve cases in one process, for choosing gains: seconds, not minutes.
+
+The world core (``simworld.world.World``) and one ``agent.controller.Controller`` per
+robot, stepped in lockstep the way the bus runs them: at tick k every agent gets its
+robot's sensing and true pose and its neighbours' states of tick k-1, then the world
+steps with every command. Truth poses only. The measures are the report's
+(``report.measures``): the mean |error| over neighbour pairs and the last quarter,
+phase by the thesis's eq. 3.1 from the true x, workload from the boundaries and the
+map's true depth profile. The run is the one ``btrack sim --localization truth`` makes,
+bit for bit (a test compares the two tracks); only timeouts under load could make
+the bus run differ.
+
+Usage (each --set is SECTION.KEY=VALUE of the agent's configuration file):
+
+    .venv/bin/python bench/tune.py                      # the twelve cases, 1200 s each
+    .venv/bin/python bench/tune.py --set gains.cycle_s=240 --set patrol.passes_per_sweep=20
+    .venv/bin/python bench/tune.py --maps half-algae --starts ahead:1 --duration 600
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import multiprocessing
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from agent import config as agent_config  # noqa: E402
+from agent.controller import Controller, Neighbour, initial_segment  # noqa: E402
+from report import measures as m  # noqa: E402
+from report.thesis import MAPS, PHASE_SSE_RAD, STARTS, WORKLOAD_SSE_M2, thesis_cell  # noqa: E402
+from simworld.maps import load_map  # noqa: E402
+from simworld.world import World  # noqa: E402
+
+DT_S = 0.1  # the world's tick at 10 Hz control
+ROBOTS = 3
+BIN_M = 0.1  # the report's depth bins (the world's WorldInfo default)
+
+
+@dataclass
+class Case:
+    map: str
+    start: str
+    duration_s: float
+    seed: int
+    overrides: dict[str, dict[str, Any]]
+
+
+def run_case(case: Case) -> dict[str, Any]:
+    """One case in lockstep; its steady-state errors and the robots' true tracks."""
+    gains, patrol, limits = agent_config.load(None, case.overrides)
+    gmap = load_map(case.map, seed=case.seed)
+    world = World(gmap, ROBOTS, case.start, seed=case.seed)
+    lo_e, hi_e = gmap.edge_lo, gmap.edge_hi
+    ticks = int(round(case.duration_s / DT_S))
+    x, y = np.zeros((ROBOTS, ticks)), np.zeros((ROBOTS, ticks))
+    lo, hi, direction = (np.zeros((ROBOTS, ticks)) for _ in range(3))
+    controllers: list[Controller] = []
+    published: list[Neighbour | None] = [None] * ROBOTS  # each agent's state of tick k-1
+    for k in range(ticks):
+        cmds, now = {}, []
+        for i in range(ROBOTS):
+            reading = world.sense(i)
+            px, py, pth = world.truth(i)
+            if k == 0:
+                seg = initial_segment(i, ROBOTS, lo_e, hi_e)
+                controllers.append(Controller(i, *seg, lo_e, hi_e, px, gains, patrol, limits))
+            out = controllers[i].step(
+                DT_S, px, py, pth, reading.ice, reading.algae,
+                published[i - 1] if i > 0 else None,
+                published[i + 1] if i + 1 < ROBOTS else None,
+                i > 0, i + 1 < ROBOTS,
+            )
+            now.append(Neighbour(i, out.lo, out.hi, out.phase_des, out.workload))
+            cmds[i] = (out.v, out.omega)
+            x[i, k], y[i, k] = px, py
+            lo[i, k], hi[i, k], direction[i, k] = out.lo, out.hi, out.direction
+        published = list(now)
+        world.step(cmds, DT_S)
+    t = np.arange(ticks) * DT_S
+    ids = range(ROBOTS)
+    depth = gmap.patrol_depth_bins(BIN_M)  # what the world tells the recorder
+    phase = {i: m.position_phase(x[i], lo[i], hi[i], direction[i]) for i in ids}
+    work = {i: m.true_workload(lo[i], hi[i], lo_e, BIN_M, depth) for i in ids}
+    pairs = m.neighbour_pairs(list(ids))
+    phase_sse, _ = m.steady_state(t, m.pair_errors(phase, pairs, wrap=True))
+    work_sse, _ = m.steady_state(t, m.pair_errors(work, pairs, wrap=False))
+    return {
+        "map": case.map, "start": case.start, "seed": case.seed,
+        "duration_s": case.duration_s,
+        "phase_sse_rad": phase_sse, "workload_sse_m2": work_sse,
+        "thesis_phase_sse_rad": thesis_cell(PHASE_SSE_RAD, case.map, case.start),
+        "thesis_workload_sse_m2": thesis_cell(WORKLOAD_SSE_M2, case.map, case.start),
+        "x": x, "y": y,
+    }
+
+
+def parse_set(text: str) -> tuple[str, str, Any]:
+    """SECTION.KEY=VALUE, VALUE as JSON (a number, true/false) or else a string."""
+    name, sep, raw = text.partition("=")
+    section, dot, key = name.partition(".")
+    if not sep or not dot or not section or not key:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected SECTION.KEY=VALUE")
+    try:
+        value = json.loads(raw)
+    except json.JSONDecodeError:
+        value = raw
+    return section, key, value
+
+
+def ratio(thesis: float, ours: float) -> float:
+    return thesis / ours if ours > 0 else math.inf
+
+
+def times(r: float) -> str:
+    """A ratio for the table: a workload error of nearly zero is not '1e14x'."""
+    return f"{r:5.1f}x" if r < 1000 else " >999x"
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--maps", nargs="+", choices=MAPS, default=list(MAPS))
+    p.add_argument("--starts", nargs="+", choices=STARTS, default=list(STARTS))
+    p.add_argument("--duration", type=float, default=1200.0, metavar="S",
+                   help="simulated seconds per case (the suite's 1200)")
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--set", dest="sets", type=parse_set, action="append", default=[],
+                   metavar="SECTION.KEY=VALUE", help="override the agents' configuration")
+    p.add_argument("--jobs", type=int, default=2, help="cases at once (processes)")
+    p.add_argument("--json", type=Path, metavar="FILE", help="write the results here")
+    p.add_argument("--tracks", type=Path, metavar="FILE.npz",
+                   help="write every case's true x and y per tick (for comparison)")
+    args = p.parse_args(argv)
+    if args.duration <= 0 or args.jobs < 1:
+        p.error("--duration must be positive and --jobs at least 1")
+    overrides: dict[str, dict[str, Any]] = {}
+    for section, key, value in args.sets:
+        overrides.setdefault(section, {})[key] = value
+    try:
+        agent_config.load(None, overrides)
+    except agent_config.ConfigError as exc:
+        p.error(str(exc))
+    cases = [Case(mp, st, args.duration, args.seed, overrides)
+             for mp in args.maps for st in args.starts]
+    began = time.monotonic()
+    results = []
+    ctx = multiprocessing.get_context("spawn")
+    with ctx.Pool(min(args.jobs, len(cases))) as pool:
+        for res in pool.imap(run_case, cases):
+            results.append(res)
+            print(f"{res['map']:13s} {res['start']:9s} "
+                  f"phase {res['phase_sse_rad']:.4f} rad "
+                  f"({times(ratio(res['thesis_phase_sse_rad'], res['phase_sse_rad']))} below)  "
+                  f"workload {res['workload_sse_m2']:.4f} m^2 "
+                  f"({times(ratio(res['thesis_workload_sse_m2'], res['workload_sse_m2']))} below)",
+                  flush=True)
+    phase_r = [ratio(r["thesis_phase_sse_rad"], r["phase_sse_rad"]) for r in results]
+    work_r = [ratio(r["thesis_workload_sse_m2"], r["workload_sse_m2"]) for r in results]
+    print(f"{len(results)} cases in {time.monotonic() - began:.0f} s: phase {min(phase_r):.2f}x "
+          f"to {times(max(phase_r)).strip()} below the thesis, "
+          f"workload {min(work_r):.2f}x or more; "
+          f"cells short of 5x: phase {sum(r < 5 for r in phase_r)}, "
+          f"workload {sum(r < 5 for r in work_r)}")
+    if args.json:
+        rows = [{k: v for k, v in r.items() if k not in ("x", "y")} for r in results]
+        args.json.write_text(json.dumps({"overrides": overrides, "cases": rows}, indent=2))
+    if args.tracks:
+        arrays = {}
+        for r in results:
+            name = f"{r['map']}_{r['start']}"
+            arrays[f"{name}_x"], arrays[f"{name}_y"] = r["x"], r["y"]
+        np.savez(args.tracks, **arrays)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,63 @@
+"""``bench/tune.py``, the in-process replica of the thesis suite used to choose gains:
+its run is the bus's run, bit for bit, and its command prints and writes the table."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from report.load import load_run
+from tests.procutil import run_sim
+
+TUNE = Path(__file__).resolve().parent.parent / "bench" / "tune.py"
+
+
+def tune(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, str(TUNE), *args], capture_output=True, text=True,
+                          timeout=300)
+
+
+def test_in_process_replica_is_the_bus_run_bit_for_bit(tmp_path):
+    case = ["--map", "random-algae", "--start", "ahead:1", "--seed", "3", "--duration", "60"]
+    sim = run_sim(tmp_path / "bus", "--robots", "3", "--localization", "truth", "--no-report",
+                  *case)
+    assert sim.returncode == 0, sim.stderr[-3000:]
+    res = tune("--maps", "random-algae", "--starts", "ahead:1", "--seed", "3",
+               "--duration", "60", "--jobs", "1", "--tracks", str(tmp_path / "tracks.npz"),
+               "--json", str(tmp_path / "tune.json"))
+    assert res.returncode == 0, res.stderr[-3000:]
+    tracks = np.load(tmp_path / "tracks.npz")
+    x, y = tracks["random-algae_ahead:1_x"], tracks["random-algae_ahead:1_y"]
+    assert x.shape == (3, 600)
+    run = load_run(tmp_path / "bus")
+    for i in range(3):
+        truth = run.truth[i]
+        assert truth.x.size >= 600
+        # every tick's true position, to the last bit: the same controllers, the same world
+        assert np.array_equal(truth.x[:600], x[i]) and np.array_equal(truth.y[:600], y[i])
+    # and the robots did move along the edge (not two idle teams agreeing)
+    assert np.ptp(x) > 1.0
+    doc = json.loads((tmp_path / "tune.json").read_text())
+    (row,) = doc["cases"]
+    assert (row["map"], row["start"], row["thesis_phase_sse_rad"]) == ("random-algae", "ahead:1",
+                                                                       0.257)
+    assert 0.0 < row["phase_sse_rad"] < 3.2
+
+
+def test_tune_command_applies_overrides_and_refuses_bad_ones(tmp_path):
+    base = ["--maps", "half-algae", "--starts", "in-phase", "--duration", "120", "--jobs", "1"]
+    plain = tune(*base, "--json", str(tmp_path / "a.json"))
+    slower = tune(*base, "--set", "gains.cycle_s=300", "--json", str(tmp_path / "b.json"))
+    assert plain.returncode == 0 and slower.returncode == 0, plain.stderr + slower.stderr
+    assert "half-algae" in plain.stdout and "1 cases in" in plain.stdout
+    a = json.loads((tmp_path / "a.json").read_text())
+    b = json.loads((tmp_path / "b.json").read_text())
+    assert b["overrides"] == {"gains": {"cycle_s": 300}}
+    assert a["cases"][0]["phase_sse_rad"] != b["cases"][0]["phase_sse_rad"]
+    bad = tune(*base, "--set", "gains.bogus=1")
+    assert bad.returncode == 2 and "unknown key(s) bogus" in bad.stderr
+    assert tune(*base, "--set", "cycle_s").returncode == 2
