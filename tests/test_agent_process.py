@@ -30,6 +30,20 @@ def neighbour_state(robot: int, k: int, lo: float, hi: float) -> AgentState:
                       upper=-1 if robot == 2 else 1, edge_lo=0.0, edge_hi=6.0)
 
 
+def hear_robot1(session: zenoh.Session, keys: Keys) -> tuple[
+        queue.SimpleQueue[AgentState], queue.SimpleQueue[Cmd], queue.SimpleQueue[str]]:
+    """Queues of what agent 1 publishes: its states, its commands, its liveliness."""
+    states: queue.SimpleQueue[AgentState] = queue.SimpleQueue()
+    cmds: queue.SimpleQueue[Cmd] = queue.SimpleQueue()
+    alive: queue.SimpleQueue[str] = queue.SimpleQueue()
+    session.declare_subscriber(
+        keys.state(1), lambda s: states.put(decode(AgentState, s.payload.to_bytes()))
+    )
+    session.declare_subscriber(keys.cmd(1), lambda s: cmds.put(decode(Cmd, s.payload.to_bytes())))
+    session.liveliness().declare_subscriber(keys.alive(1), lambda s: alive.put(str(s.kind)))
+    return states, cmds, alive
+
+
 def sense_and_pose(session: zenoh.Session, keys: Keys, k: int, x: float = 3.0) -> None:
     """The world's part of tick k for robot 1: its Sense, then its Pose."""
     session.put(keys.sense(1), encode(Sense(k * 0.1, k, 1, False, False, 0.0, 0.0, 0.0, 6.0,
@@ -40,14 +54,7 @@ def sense_and_pose(session: zenoh.Session, keys: Keys, k: int, x: float = 3.0) -
 def test_agent_survives_garbage_and_counts_it(bus, tmp_path):
     ns, port, session = bus
     keys = Keys(ns)
-    states: queue.SimpleQueue[AgentState] = queue.SimpleQueue()
-    cmds: queue.SimpleQueue[Cmd] = queue.SimpleQueue()
-    session.declare_subscriber(
-        keys.state(1), lambda s: states.put(decode(AgentState, s.payload.to_bytes()))
-    )
-    session.declare_subscriber(keys.cmd(1), lambda s: cmds.put(decode(Cmd, s.payload.to_bytes())))
-    alive: queue.SimpleQueue[str] = queue.SimpleQueue()
-    session.liveliness().declare_subscriber(keys.alive(1), lambda s: alive.put(str(s.kind)))
+    states, cmds, alive = hear_robot1(session, keys)
     # The test plays both neighbours (ids 0 and 2) and the world.
     tokens = [session.liveliness().declare_token(keys.alive(i)) for i in (0, 2)]
     enc = zenoh.Encoding(MSGPACK)
@@ -105,14 +112,7 @@ def test_agent_restarted_in_a_running_team_claims_between_its_neighbours(bus, tm
     and the claim never runs past it to the end of the edge."""
     ns, port, session = bus
     keys = Keys(ns)
-    states: queue.SimpleQueue[AgentState] = queue.SimpleQueue()
-    cmds: queue.SimpleQueue[Cmd] = queue.SimpleQueue()
-    session.declare_subscriber(
-        keys.state(1), lambda s: states.put(decode(AgentState, s.payload.to_bytes()))
-    )
-    session.declare_subscriber(keys.cmd(1), lambda s: cmds.put(decode(Cmd, s.payload.to_bytes())))
-    alive: queue.SimpleQueue[str] = queue.SimpleQueue()
-    session.liveliness().declare_subscriber(keys.alive(1), lambda s: alive.put(str(s.kind)))
+    states, cmds, alive = hear_robot1(session, keys)
     tokens = [session.liveliness().declare_token(keys.alive(i)) for i in (0, 2)]
     proc = start(["agent", "--id", "1", "--robots", "3", "--neighbour-timeout", "0.3",
                   *member_args(ns, port)], tmp_path / "agent.log")
@@ -143,14 +143,7 @@ def test_agent_restarted_hearing_nobody_yet_stands_still_before_claiming_alone(b
     (1 s) with nobody heard does it take the edge as a team of one."""
     ns, port, session = bus
     keys = Keys(ns)
-    states: queue.SimpleQueue[AgentState] = queue.SimpleQueue()
-    cmds: queue.SimpleQueue[Cmd] = queue.SimpleQueue()
-    session.declare_subscriber(
-        keys.state(1), lambda s: states.put(decode(AgentState, s.payload.to_bytes()))
-    )
-    session.declare_subscriber(keys.cmd(1), lambda s: cmds.put(decode(Cmd, s.payload.to_bytes())))
-    alive: queue.SimpleQueue[str] = queue.SimpleQueue()
-    session.liveliness().declare_subscriber(keys.alive(1), lambda s: alive.put(str(s.kind)))
+    states, cmds, alive = hear_robot1(session, keys)
     proc = start(["agent", "--id", "1", "--robots", "3", *member_args(ns, port)],
                  tmp_path / "agent.log")
     try:
