@@ -15,6 +15,7 @@ Usage (each --set is SECTION.KEY=VALUE of the agent's configuration file):
     .venv/bin/python bench/tune.py                      # the twelve cases, 1200 s each
     .venv/bin/python bench/tune.py --set gains.cycle_s=240 --set patrol.passes_per_sweep=20
     .venv/bin/python bench/tune.py --maps half-algae --starts ahead:1 --duration 600
+    .venv/bin/python bench/tune.py --maps random-algae --seeds 1 2 3   # other random maps
 """
 
 from __future__ import annotations
@@ -125,13 +126,24 @@ def times(r: float) -> str:
     return f"{r:5.1f}x" if r < 1000 else " >999x"
 
 
+def summary(results: list[dict[str, Any]]) -> str:
+    """The range of the ratios to the thesis and how many cells miss the 5x goal."""
+    phase_r = [ratio(r["thesis_phase_sse_rad"], r["phase_sse_rad"]) for r in results]
+    work_r = [ratio(r["thesis_workload_sse_m2"], r["workload_sse_m2"]) for r in results]
+    return (f"phase {min(phase_r):.2f}x to {times(max(phase_r)).strip()} below the thesis, "
+            f"workload {min(work_r):.2f}x or more; cells short of 5x: "
+            f"phase {sum(r < 5 for r in phase_r)}, workload {sum(r < 5 for r in work_r)}")
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--maps", nargs="+", choices=MAPS, default=list(MAPS))
     p.add_argument("--starts", nargs="+", choices=STARTS, default=list(STARTS))
     p.add_argument("--duration", type=float, default=1200.0, metavar="S",
                    help="simulated seconds per case (the suite's 1200)")
-    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--seeds", type=int, nargs="+", default=[1], metavar="N",
+                   help="map and world seeds; several show how much a cell moves from one "
+                        "random map (and odometry draw) to the next")
     p.add_argument("--set", dest="sets", type=parse_set, action="append", default=[],
                    metavar="SECTION.KEY=VALUE", help="override the agents' configuration")
     p.add_argument("--jobs", type=int, default=2, help="cases at once (processes)")
@@ -148,34 +160,30 @@ def main(argv: list[str] | None = None) -> int:
         agent_config.load(None, overrides)
     except agent_config.ConfigError as exc:
         p.error(str(exc))
-    cases = [Case(mp, st, args.duration, args.seed, overrides)
-             for mp in args.maps for st in args.starts]
+    cases = [Case(mp, st, args.duration, seed, overrides)
+             for seed in args.seeds for mp in args.maps for st in args.starts]
     began = time.monotonic()
     results = []
     ctx = multiprocessing.get_context("spawn")
     with ctx.Pool(min(args.jobs, len(cases))) as pool:
         for res in pool.imap(run_case, cases):
             results.append(res)
-            print(f"{res['map']:13s} {res['start']:9s} "
+            print(f"{res['map']:13s} {res['start']:9s} seed {res['seed']:<3d} "
                   f"phase {res['phase_sse_rad']:.4f} rad "
                   f"({times(ratio(res['thesis_phase_sse_rad'], res['phase_sse_rad']))} below)  "
                   f"workload {res['workload_sse_m2']:.4f} m^2 "
                   f"({times(ratio(res['thesis_workload_sse_m2'], res['workload_sse_m2']))} below)",
                   flush=True)
-    phase_r = [ratio(r["thesis_phase_sse_rad"], r["phase_sse_rad"]) for r in results]
-    work_r = [ratio(r["thesis_workload_sse_m2"], r["workload_sse_m2"]) for r in results]
-    print(f"{len(results)} cases in {time.monotonic() - began:.0f} s: phase {min(phase_r):.2f}x "
-          f"to {times(max(phase_r)).strip()} below the thesis, "
-          f"workload {min(work_r):.2f}x or more; "
-          f"cells short of 5x: phase {sum(r < 5 for r in phase_r)}, "
-          f"workload {sum(r < 5 for r in work_r)}")
+    for seed in args.seeds if len(args.seeds) > 1 else []:
+        print(f"seed {seed}: " + summary([r for r in results if r["seed"] == seed]))
+    print(f"{len(results)} cases in {time.monotonic() - began:.0f} s: " + summary(results))
     if args.json:
         rows = [{k: v for k, v in r.items() if k not in ("x", "y")} for r in results]
         args.json.write_text(json.dumps({"overrides": overrides, "cases": rows}, indent=2))
     if args.tracks:
         arrays = {}
         for r in results:
-            name = f"{r['map']}_{r['start']}"
+            name = f"{r['map']}_{r['start']}_seed{r['seed']}"
             arrays[f"{name}_x"], arrays[f"{name}_y"] = r["x"], r["y"]
         np.savez(args.tracks, **arrays)
     return 0

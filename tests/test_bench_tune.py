@@ -26,12 +26,12 @@ def test_in_process_replica_is_the_bus_run_bit_for_bit(tmp_path):
     sim = run_sim(tmp_path / "bus", "--robots", "3", "--localization", "truth", "--no-report",
                   *case)
     assert sim.returncode == 0, sim.stderr[-3000:]
-    res = tune("--maps", "random-algae", "--starts", "ahead:1", "--seed", "3",
+    res = tune("--maps", "random-algae", "--starts", "ahead:1", "--seeds", "3",
                "--duration", "60", "--jobs", "1", "--tracks", str(tmp_path / "tracks.npz"),
                "--json", str(tmp_path / "tune.json"))
     assert res.returncode == 0, res.stderr[-3000:]
     tracks = np.load(tmp_path / "tracks.npz")
-    x, y = tracks["random-algae_ahead:1_x"], tracks["random-algae_ahead:1_y"]
+    x, y = tracks["random-algae_ahead:1_seed3_x"], tracks["random-algae_ahead:1_seed3_y"]
     assert x.shape == (3, 600)
     run = load_run(tmp_path / "bus")
     for i in range(3):
@@ -58,6 +58,13 @@ def test_tune_command_applies_overrides_and_refuses_bad_ones(tmp_path):
     b = json.loads((tmp_path / "b.json").read_text())
     assert b["overrides"] == {"gains": {"cycle_s": 300}}
     assert a["cases"][0]["phase_sse_rad"] != b["cases"][0]["phase_sse_rad"]
+    seeds = tune("--maps", "random-algae", "--starts", "in-phase", "--duration", "60",
+                 "--seeds", "1", "2", "--json", str(tmp_path / "c.json"))
+    assert seeds.returncode == 0, seeds.stderr
+    assert "seed 1: phase" in seeds.stdout and "seed 2: phase" in seeds.stdout
+    rows = json.loads((tmp_path / "c.json").read_text())["cases"]
+    assert sorted(r["seed"] for r in rows) == [1, 2]
+    assert rows[0]["phase_sse_rad"] != rows[1]["phase_sse_rad"]  # two different maps
     bad = tune(*base, "--set", "gains.bogus=1")
     assert bad.returncode == 2 and "unknown key(s) bogus" in bad.stderr
     assert tune(*base, "--set", "cycle_s").returncode == 2
