@@ -2,13 +2,15 @@
 
 The world core (``simworld.world.World``) and one ``agent.controller.Controller`` per
 robot, stepped in lockstep the way the bus runs them: at tick k every agent gets its
-robot's sensing and true pose and its neighbours' states of tick k-1, then the world
-steps with every command. Truth poses only. The measures are the report's
-(``report.measures``): the mean |error| over neighbour pairs and the last quarter,
-phase by the thesis's eq. 3.1 from the true x, workload from the boundaries and the
-map's true depth profile. The run is the one ``btrack sim --localization truth`` makes,
-bit for bit (a test compares the two tracks); only timeouts under load could make
-the bus run differ.
+robot's sensing and pose (the simulator's truth, or with ``--localization odometry``
+its dead reckoning) and its neighbours' states of tick k-1, then the world steps with
+every command. The measures are the report's (``report.measures``): the mean |error|
+over neighbour pairs and the last quarter, phase by the thesis's eq. 3.1 from the true
+x, workload from the boundaries and the map's true depth profile; and, as the suite
+reports for odometry, the same from the phases and workloads the agents published.
+The run is the one ``btrack sim`` makes with the same case, seed and pose source, bit
+for bit (a test compares the tracks); only timeouts under load could make the bus run
+differ.
 
 Usage (each --set is SECTION.KEY=VALUE of the agent's configuration file):
 
@@ -16,6 +18,7 @@ Usage (each --set is SECTION.KEY=VALUE of the agent's configuration file):
     .venv/bin/python bench/tune.py --set gains.cycle_s=240 --set patrol.passes_per_sweep=20
     .venv/bin/python bench/tune.py --maps half-algae --starts ahead:1 --duration 600
     .venv/bin/python bench/tune.py --maps random-algae --seeds 1 2 3   # other random maps
+    .venv/bin/python bench/tune.py --localization odometry --odom-turn-noise 0.002
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from agent import config as agent_config  # noqa: E402
 from agent.controller import Controller, Neighbour, initial_segment  # noqa: E402
+from deploy.procs import non_negative  # noqa: E402
 from report import measures as m  # noqa: E402
 from report.thesis import MAPS, PHASE_SSE_RAD, STARTS, WORKLOAD_SSE_M2, thesis_cell  # noqa: E402
 from simworld.maps import load_map  # noqa: E402
@@ -53,24 +57,30 @@ class Case:
     duration_s: float
     seed: int
     overrides: dict[str, dict[str, Any]]
+    localization: str = "truth"  # or "odometry": the agents steer by dead reckoning
+    odom_noise: float = 0.02
+    odom_turn_noise: float | None = None  # None: as odom_noise (the world's default)
 
 
 def run_case(case: Case) -> dict[str, Any]:
-    """One case in lockstep; its steady-state errors and the robots' true tracks."""
+    """One case in lockstep; its steady-state errors (against ground truth, and as the
+    agents saw them) and the robots' true tracks."""
     gains, patrol, limits = agent_config.load(None, case.overrides)
     gmap = load_map(case.map, seed=case.seed)
-    world = World(gmap, ROBOTS, case.start, seed=case.seed)
+    world = World(gmap, ROBOTS, case.start, seed=case.seed, odom_noise=case.odom_noise,
+                  odom_turn_noise=case.odom_turn_noise)
+    odometry = case.localization == "odometry"
     lo_e, hi_e = gmap.edge_lo, gmap.edge_hi
     ticks = int(round(case.duration_s / DT_S))
     x, y = np.zeros((ROBOTS, ticks)), np.zeros((ROBOTS, ticks))
-    lo, hi, direction = (np.zeros((ROBOTS, ticks)) for _ in range(3))
+    lo, hi, direction, seen_phase, seen_work = (np.zeros((ROBOTS, ticks)) for _ in range(5))
     controllers: list[Controller] = []
     published: list[Neighbour | None] = [None] * ROBOTS  # each agent's state of tick k-1
     for k in range(ticks):
         cmds, now = {}, []
         for i in range(ROBOTS):
             reading = world.sense(i)
-            px, py, pth = world.truth(i)
+            px, py, pth = world.odometry_pose(i) if odometry else world.truth(i)
             if k == 0:
                 seg = initial_segment(i, ROBOTS, lo_e, hi_e)
                 controllers.append(Controller(i, *seg, lo_e, hi_e, px, gains, patrol, limits))
@@ -82,8 +92,9 @@ def run_case(case: Case) -> dict[str, Any]:
             )
             now.append(Neighbour(i, out.lo, out.hi, out.phase_des, out.workload))
             cmds[i] = (out.v, out.omega)
-            x[i, k], y[i, k] = px, py
+            x[i, k], y[i, k] = world.truth(i)[:2]
             lo[i, k], hi[i, k], direction[i, k] = out.lo, out.hi, out.direction
+            seen_phase[i, k], seen_work[i, k] = out.phase, out.workload
         published = list(now)
         world.step(cmds, DT_S)
     t = np.arange(ticks) * DT_S
@@ -94,10 +105,16 @@ def run_case(case: Case) -> dict[str, Any]:
     pairs = m.neighbour_pairs(list(ids))
     phase_sse, _ = m.steady_state(t, m.pair_errors(phase, pairs, wrap=True))
     work_sse, _ = m.steady_state(t, m.pair_errors(work, pairs, wrap=False))
+    seen_phase_sse, _ = m.steady_state(
+        t, m.pair_errors({i: seen_phase[i] for i in ids}, pairs, wrap=True))
+    seen_work_sse, _ = m.steady_state(
+        t, m.pair_errors({i: seen_work[i] for i in ids}, pairs, wrap=False))
     return {
         "map": case.map, "start": case.start, "seed": case.seed,
         "duration_s": case.duration_s,
+        "localization": case.localization,
         "phase_sse_rad": phase_sse, "workload_sse_m2": work_sse,
+        "phase_sse_agents_rad": seen_phase_sse, "workload_sse_agents_m2": seen_work_sse,
         "thesis_phase_sse_rad": thesis_cell(PHASE_SSE_RAD, case.map, case.start),
         "thesis_workload_sse_m2": thesis_cell(WORKLOAD_SSE_M2, case.map, case.start),
         "x": x, "y": y,
@@ -126,10 +143,11 @@ def times(r: float) -> str:
     return f"{r:5.1f}x" if r < 1000 else " >999x"
 
 
-def summary(results: list[dict[str, Any]]) -> str:
-    """The range of the ratios to the thesis and how many cells miss the 5x goal."""
-    phase_r = [ratio(r["thesis_phase_sse_rad"], r["phase_sse_rad"]) for r in results]
-    work_r = [ratio(r["thesis_workload_sse_m2"], r["workload_sse_m2"]) for r in results]
+def summary(results: list[dict[str, Any]], seen: str = "") -> str:
+    """The range of the ratios to the thesis and how many cells miss the 5x goal;
+    ``seen="_agents"`` for the errors as the agents published them."""
+    phase_r = [ratio(r["thesis_phase_sse_rad"], r[f"phase_sse{seen}_rad"]) for r in results]
+    work_r = [ratio(r["thesis_workload_sse_m2"], r[f"workload_sse{seen}_m2"]) for r in results]
     return (f"phase {min(phase_r):.2f}x to {times(max(phase_r)).strip()} below the thesis, "
             f"workload {min(work_r):.2f}x or more; cells short of 5x: "
             f"phase {sum(r < 5 for r in phase_r)}, workload {sum(r < 5 for r in work_r)}")
@@ -144,6 +162,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seeds", type=int, nargs="+", default=[1], metavar="N",
                    help="map and world seeds; several show how much a cell moves from one "
                         "random map (and odometry draw) to the next")
+    p.add_argument("--localization", choices=("truth", "odometry"), default="truth",
+                   help="the agents' poses: the simulator's truth, or dead reckoning "
+                        "(errors are measured against truth either way)")
+    p.add_argument("--odom-noise", type=non_negative, default=0.02, metavar="F",
+                   help="odometry distance noise, as btrack sim")
+    p.add_argument("--odom-turn-noise", type=non_negative, metavar="F",
+                   help="odometry turn noise (default: as --odom-noise), as btrack sim")
     p.add_argument("--set", dest="sets", type=parse_set, action="append", default=[],
                    metavar="SECTION.KEY=VALUE", help="override the agents' configuration")
     p.add_argument("--jobs", type=int, default=2, help="cases at once (processes)")
@@ -160,7 +185,8 @@ def main(argv: list[str] | None = None) -> int:
         agent_config.load(None, overrides)
     except agent_config.ConfigError as exc:
         p.error(str(exc))
-    cases = [Case(mp, st, args.duration, seed, overrides)
+    cases = [Case(mp, st, args.duration, seed, overrides, args.localization, args.odom_noise,
+                  args.odom_turn_noise)
              for seed in args.seeds for mp in args.maps for st in args.starts]
     began = time.monotonic()
     results = []
@@ -177,6 +203,9 @@ def main(argv: list[str] | None = None) -> int:
     for seed in args.seeds if len(args.seeds) > 1 else []:
         print(f"seed {seed}: " + summary([r for r in results if r["seed"] == seed]))
     print(f"{len(results)} cases in {time.monotonic() - began:.0f} s: " + summary(results))
+    if args.localization == "odometry":
+        print("as the agents saw it (their own phases and workloads): "
+              + summary(results, "_agents"))
     if args.json:
         rows = [{k: v for k, v in r.items() if k not in ("x", "y")} for r in results]
         args.json.write_text(json.dumps({"overrides": overrides, "cases": rows}, indent=2))

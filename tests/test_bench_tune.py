@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from report.load import load_run
 from tests.procutil import run_sim
@@ -21,14 +22,15 @@ def tune(*args: str) -> subprocess.CompletedProcess[str]:
                           timeout=300)
 
 
-def test_in_process_replica_is_the_bus_run_bit_for_bit(tmp_path):
-    case = ["--map", "random-algae", "--start", "ahead:1", "--seed", "3", "--duration", "60"]
-    sim = run_sim(tmp_path / "bus", "--robots", "3", "--localization", "truth", "--no-report",
-                  *case)
+@pytest.mark.parametrize("poses", ["truth", "odometry"])
+def test_in_process_replica_is_the_bus_run_bit_for_bit(tmp_path, poses):
+    case = ["--seed", "3", "--duration", "60"]
+    sim = run_sim(tmp_path / "bus", "--robots", "3", "--localization", poses, "--no-report",
+                  "--map", "random-algae", "--start", "ahead:1", *case)
     assert sim.returncode == 0, sim.stderr[-3000:]
     res = tune("--maps", "random-algae", "--starts", "ahead:1", "--seeds", "3",
-               "--duration", "60", "--jobs", "1", "--tracks", str(tmp_path / "tracks.npz"),
-               "--json", str(tmp_path / "tune.json"))
+               "--duration", "60", "--jobs", "1", "--localization", poses,
+               "--tracks", str(tmp_path / "tracks.npz"), "--json", str(tmp_path / "tune.json"))
     assert res.returncode == 0, res.stderr[-3000:]
     tracks = np.load(tmp_path / "tracks.npz")
     x, y = tracks["random-algae_ahead:1_seed3_x"], tracks["random-algae_ahead:1_seed3_y"]
@@ -37,15 +39,18 @@ def test_in_process_replica_is_the_bus_run_bit_for_bit(tmp_path):
     for i in range(3):
         truth = run.truth[i]
         assert truth.x.size >= 600
-        # every tick's true position, to the last bit: the same controllers, the same world
+        # every tick's true position, to the last bit: the same controllers, the same
+        # world, the same odometry draws
         assert np.array_equal(truth.x[:600], x[i]) and np.array_equal(truth.y[:600], y[i])
     # and the robots did move along the edge (not two idle teams agreeing)
     assert np.ptp(x) > 1.0
     doc = json.loads((tmp_path / "tune.json").read_text())
     (row,) = doc["cases"]
-    assert (row["map"], row["start"], row["thesis_phase_sse_rad"]) == ("random-algae", "ahead:1",
-                                                                       0.257)
-    assert 0.0 < row["phase_sse_rad"] < 3.2
+    assert (row["map"], row["start"], row["localization"]) == ("random-algae", "ahead:1", poses)
+    assert row["thesis_phase_sse_rad"] == 0.257
+    assert 0.0 < row["phase_sse_rad"] < 3.2 and 0.0 < row["phase_sse_agents_rad"] < 3.2
+    if poses == "truth":  # the agents' own view is the truth
+        assert row["phase_sse_agents_rad"] == pytest.approx(row["phase_sse_rad"], abs=1e-9)
 
 
 def test_tune_command_applies_overrides_and_refuses_bad_ones(tmp_path):
