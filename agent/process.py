@@ -184,16 +184,16 @@ class AgentNode:
         except DecodeError as exc:
             self._drop(key, str(exc))
 
+    def _latest_state(self, rid: int | None, newest_k: int) -> AgentState | None:
+        """A neighbour's latest state of tick ``newest_k`` or before, None if none."""
+        hist = {} if rid is None else self.states.get(rid, {})
+        ks = [kk for kk in hist if kk <= newest_k]
+        return hist[max(ks)] if ks else None
+
     def _neighbour_view(self, rid: int | None, k: int) -> Neighbour | None:
         """The neighbour's state of tick k-1 (or the latest before k if that is missing)."""
-        if rid is None:
-            return None
-        hist = self.states.get(rid, {})
-        ks = [kk for kk in hist if kk < k]
-        if not ks:
-            return None
-        s = hist[max(ks)]
-        return Neighbour(s.robot, s.lo, s.hi, s.phase_des, s.workload)
+        s = self._latest_state(rid, k - 1)
+        return None if s is None else Neighbour(s.robot, s.lo, s.hi, s.phase_des, s.workload)
 
     def _first_segment(self, k: int, edge_lo: float, edge_hi: float) -> tuple[float, float]:
         """Equal initial segments when the team starts together (tick 0, or no
@@ -211,12 +211,8 @@ class AgentNode:
         joining a running team claims a share of. Its state of tick k itself counts:
         under load a quicker neighbour's state of the tick being decided can be the
         first one heard of it."""
-        hist = {} if rid is None else self.states.get(rid, {})
-        ks = [kk for kk in hist if kk <= k]
-        if not ks:
-            return None
-        s = hist[max(ks)]
-        return SegmentView(s.lo, s.hi, s.workload)
+        s = self._latest_state(rid, k)
+        return None if s is None else SegmentView(s.lo, s.hi, s.workload)
 
     def _neighbours_ready(self, k: int) -> bool:
         """Whether every neighbour's state of tick k-1 is here; on the wall clock, where
