@@ -130,4 +130,3 @@ def wait_for_world(run_dir: Path, launcher: subprocess.Popen[str], timeout_s: fl
 
 __all__ = ["end", "end_children_of_run", "free_port", "hub_session", "kill_pid", "member_args",
            "pid_alive", "run_sim", "start", "unique_ns", "wait_for", "wait_for_world"]
-
