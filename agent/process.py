@@ -167,6 +167,11 @@ class AgentNode:
                     raise DecodeError(f"sense for robot {msg.robot}")
                 self.senses[msg.k] = msg
                 self._prune(self.senses)
+                if msg.pose:  # the robot's pose came with its sensing
+                    x, y, theta = msg.pose
+                    self.poses[msg.k] = Pose(msg.t, msg.k, msg.robot, x, y, theta,
+                                             source=msg.pose_source)
+                    self._prune(self.poses)
             elif kind == "pose":
                 pose = decode(Pose, payload)
                 if pose.robot != self.robot:

@@ -151,6 +151,8 @@ def load_run(path: str | Path) -> RunData:
                 elif topic.endswith("/sense") and topic.startswith("robot/"):
                     msg = json.loads(message.data)
                     odometry[int(msg["robot"])].append(tuple(msg[f] for f in ODOM_FIELDS))
+                    if msg.get("pose"):  # the pose the robot was given came with its sensing
+                        poses[int(msg["robot"])].append((msg["t"], *msg["pose"]))
                 elif topic == "world/info":
                     info = json.loads(message.data)
                 elif topic.startswith("alive/agent/"):

@@ -1,11 +1,12 @@
 """``btrack world``: the simulator process, the run's clock (DESIGN.md "Time").
 
-Lockstep (default): tick k publishes every robot's Pose, the laser Scan, every
-robot's Sense and then the team's Truth (one message, for the recorder), waits for
+Lockstep (default): tick k publishes the laser Scan (with ``--localization pf``),
+every robot's Sense (with the robot's truth or odometry pose in it, unless a localizer
+gives the poses) and then the team's Truth (one message, for the recorder), waits for
 tick k's Cmd from every live agent (a dead agent is not waited for, a silent one at
 most ``--cmd-timeout``), publishes the Tick and steps the world. ``--realtime`` paces
 ticks on the wall clock instead and uses each robot's latest command.
-With ``--localization pf`` the world publishes no Pose: the localizer turns tick k's
+With ``--localization pf`` the Senses carry no pose: the localizer turns tick k's
 Scan and Sense into tick k's poses, the agents act on them, and the world, which
 waited for the localizer's liveliness before tick 0, waits for their commands as
 usual. Scans come at the control rate (one per tick).
@@ -35,7 +36,6 @@ from wire import (
     DecodeError,
     Fault,
     Keys,
-    Pose,
     Scan,
     Sense,
     Tick,
@@ -79,8 +79,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--localization",
         choices=["truth", "odometry", "pf"],
         default="truth",
-        help="what the world publishes as each robot's Pose (default truth); pf: none, "
-        "it publishes laser scans and waits for the localizer",
+        help="the pose each robot's Sense carries (default truth); pf: none, the world "
+        "publishes laser scans and waits for the localizer's poses",
     )
     p.add_argument(
         "--laser-noise",
@@ -198,7 +198,6 @@ class WorldProcess:
             return declare_publisher(session, key)
 
         self.pub_truth = pub(k.truth())
-        self.pub_pose = [pub(k.pose(i)) for i in range(self.n)]
         self.pub_sense = [pub(k.sense(i)) for i in range(self.n)]
         self.pub_scan = pub(k.scan())
         self.pub_tick = pub(k.world_tick())
@@ -295,18 +294,20 @@ class WorldProcess:
             log.warning("tick %d: robot %d carried by (%g, %g) m", k, robot, dx, dy)
         odometry = self.pose_source == "odometry"
         truth = [world.truth(i) for i in range(self.n)]
-        if self.laser is None:
-            for i in range(self.n):
-                px, py, pth = world.odometry_pose(i) if odometry else truth[i]
-                self.pub_pose[i].put(encode(Pose(t, k, i, px, py, pth, source=self.pose_source)))
-        else:  # the localizer publishes the poses
+        if self.laser is not None:  # the localizer publishes the poses
             s = self.laser.scanner
             ranges = self.laser.scan([(x, y) for x, y, _ in truth])
             self.pub_scan.put(encode(Scan(t, k, ranges, s.x, s.y, s.theta, s.angle_min,
                                           s.angle_step, s.range_max)))
         for i in range(self.n):
             r = world.sense(i)
-            sense = Sense(t, k, i, r.ice, r.algae, r.odom_dist_m, r.odom_dtheta, lo, hi, dt)
+            if self.laser is None:  # the pose travels in the Sense
+                pose = list(world.odometry_pose(i) if odometry else truth[i])
+                source = self.pose_source
+            else:
+                pose, source = [], ""
+            sense = Sense(t, k, i, r.ice, r.algae, r.odom_dist_m, r.odom_dtheta, lo, hi, dt,
+                          pose, source)
             self.pub_sense[i].put(encode(sense))  # an agent may act on its Sense
         # for the recorder only, after the agents' inputs; one message for the team
         self.pub_truth.put(encode(Truth.of_team(t, k, truth)))

@@ -160,6 +160,31 @@ def test_agent_restarted_hearing_nobody_yet_stands_still_before_claiming_alone(b
     assert proc.returncode == 0, (tmp_path / "agent.log").read_text()
 
 
+def test_agent_acts_on_a_sense_that_carries_its_pose(bus, tmp_path):
+    """As the simulator sends it with truth or odometry poses: one message per tick, no
+    Pose message. The agent acts on each tick, on the pose in it."""
+    ns, port, session = bus
+    keys = Keys(ns)
+    states, cmds, alive = hear_robot1(session, keys)
+    proc = start(["agent", "--id", "1", "--robots", "3", "--neighbour-timeout", "0.3",
+                  *member_args(ns, port)], tmp_path / "agent.log")
+    try:
+        alive.get(timeout=30)
+        for k in range(3):
+            x = 2.5 + 0.25 * k
+            session.put(keys.sense(1), encode(Sense(
+                k * 0.1, k, 1, False, False, 0.0, 0.0, 0.0, 6.0, 0.1,
+                [x, -1.0, math.pi / 2], "odometry")))
+            cmd = cmds.get(timeout=10)
+            state = states.get(timeout=10)
+            assert cmd.k == k and state.k == k
+            # alone, it patrols the whole edge; its phase is where that pose puts it
+            assert (state.lo, state.hi, state.direction) == (0.0, 6.0, 1)
+            assert state.phase == pytest.approx(math.pi * x / 6.0)
+    finally:
+        end(proc)
+
+
 def test_agent_refuses_unstable_gains(tmp_path):
     proc = start(["agent", "--id", "0", "--robots", "3", "--k-phi", "0.7",
                   "--ns", unique_ns(), "--no-multicast"], tmp_path / "a.log")

@@ -71,6 +71,23 @@ def test_team_truth_round_trip_and_shape_checked():
         decode(Truth, msgpack.packb({**msg.__dict__, "x": [0.5, math.nan, 4.5]}))
 
 
+def test_sense_carries_a_pose_or_none_and_a_bad_one_is_refused():
+    bare = Sense(0.5, 5, 1, True, False, 0.02, 0.001, 0.0, 6.0, 0.1)
+    assert decode(Sense, encode(bare)) == bare and bare.pose == []
+    # an older Sense without the fields at all still decodes, with no pose
+    old = {k: v for k, v in bare.__dict__.items() if k not in ("pose", "pose_source")}
+    assert decode(Sense, msgpack.packb(old)) == bare
+    posed = Sense(0.5, 5, 1, True, False, 0.02, 0.001, 0.0, 6.0, 0.1,
+                  [2.5, -1.0, 1.57], "odometry")
+    assert decode(Sense, encode(posed)) == posed
+    for change, reason in (({"pose": [2.5, -1.0]}, "x, y and theta"),
+                           ({"pose_source": "pf"}, "truth or odometry"),
+                           ({"pose": []}, "x, y and theta"),
+                           ({"pose": [2.5, math.inf, 0.0]}, "not finite")):
+        with pytest.raises(DecodeError, match=reason):
+            decode(Sense, msgpack.packb({**posed.__dict__, **change}))
+
+
 @given(st.binary(max_size=200))
 def test_random_bytes_never_raise_anything_else(data):
     try:

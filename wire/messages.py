@@ -36,11 +36,20 @@ class Sense:
     edge_lo: float  # s_0 of the whole edge, m
     edge_hi: float  # s_n of the whole edge, m
     dt: float  # control period, s
+    # The robot's own pose (x, y, theta) when the source of this Sense also gives it
+    # (the simulator's truth or odometry): one message per robot and tick instead of a
+    # Sense and a Pose. Empty when the pose comes on its own (a localizer's Pose).
+    pose: list[float] = field(default_factory=list)
+    pose_source: str = ""  # truth | odometry, with a pose
 
     def check(self) -> None:
         _require(self.t >= 0 and self.k >= 0 and self.robot >= 0, "negative t, k or robot")
         _require(self.edge_lo < self.edge_hi, "edge_lo must be below edge_hi")
         _require(self.dt > 0, "dt must be positive")
+        if self.pose or self.pose_source:
+            _require(len(self.pose) == 3, "pose: x, y and theta")
+            _require(self.pose_source in ("truth", "odometry"),
+                     f"pose_source must be truth or odometry, not {self.pose_source!r}")
 
 
 @dataclass(frozen=True)
