@@ -35,11 +35,11 @@ from deploy.procs import (
     stop_on_sigterm,
     wait_listening,
 )
-from wire import AgentState, DecodeError, Keys, Tick, decode, encode
+from wire import DecodeError, Keys, Progress, Tick, decode, encode
 from wire import Fault as WireFault
 from wire.session import SessionOptions, declare_publisher, loopback_options, open_session
 
-STATE_RING = 256  # agents' states kept between two progress lines (the latest count)
+PROGRESS_QUERY_S = 0.5  # longest wait for the recorder's answer to a progress query
 BACKGROUND_NICE = 10  # the recorder (the team's router) is off the lockstep's path
 STARTUP_S = 60.0
 
@@ -87,6 +87,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "times drawn from SEED")
     p.add_argument("--no-report", action="store_true", help="skip the report at the end")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.add_argument("--progress-every", type=non_negative, metavar="SECONDS",
+                   help="wall seconds between progress lines (1 on a terminal, else 5)")
     p.add_argument("--hil", action="store_true",
                    help="hardware in the loop: emulated Creates and LMS on pseudo-terminals "
                         "behind the real bridges (btrack bridge); --duration is wall seconds")
@@ -105,18 +107,14 @@ def _agent_args(args: argparse.Namespace) -> list[str]:
 
 
 class Monitor:
-    """The launcher's view of the run, for progress lines: last tick, agents' errors."""
+    """The launcher's view of the run, for progress lines: it asks the recorder when it
+    prints (a Zenoh query), so following the run costs no message per tick."""
 
     def __init__(self, session: zenoh.Session, keys: Keys):
-        # Ring channels keep the latest samples in Zenoh, with no Python callback per
-        # message: the launcher reads them when it prints a progress line.
-        self.tick: Tick | None = None
-        self.states: dict[int, AgentState] = {}
+        self.session = session
+        self.keys = keys
+        self.progress: Progress | None = None
         self.recorder_alive = threading.Event()
-        self._tick_sub = session.declare_subscriber(
-            keys.world_tick(), zenoh.handlers.RingChannel(1))
-        self._state_sub = session.declare_subscriber(
-            keys.state("*"), zenoh.handlers.RingChannel(STATE_RING))
         self._alive_sub = session.liveliness().declare_subscriber(
             keys.alive_recorder(), self._on_recorder, history=True)
 
@@ -124,30 +122,32 @@ class Monitor:
         if sample.kind == zenoh.SampleKind.PUT:
             self.recorder_alive.set()
 
-    def drain(self) -> None:
-        if (sample := self._tick_sub.try_recv()) is not None:
-            try:
-                self.tick = decode(Tick, sample.payload.to_bytes())
-            except DecodeError:
-                pass
-        while (sample := self._state_sub.try_recv()) is not None:
-            try:
-                st = decode(AgentState, sample.payload.to_bytes())
-            except DecodeError:
-                continue
-            self.states[st.robot] = st
+    def ask(self) -> None:
+        """Ask the recorder how far the run has got; keep the last answer if none comes
+        (the niced recorder can be slow to answer under load)."""
+        try:
+            for reply in self.session.get(self.keys.progress(), timeout=PROGRESS_QUERY_S):
+                if reply.ok is not None:
+                    try:
+                        self.progress = decode(Progress, reply.ok.payload.to_bytes())
+                    except DecodeError:
+                        pass
+        except zenoh.ZError:
+            pass
 
     def errors(self) -> tuple[float, float]:
         """Mean |phase error| and |workload error| over neighbour pairs, as the agents
         themselves see them (the report measures against truth); live agents only."""
-        live = set(self.tick.live) if self.tick else set(self.states)
-        ids = sorted(r for r in self.states if r in live)
+        p = self.progress
+        if p is None:
+            return float("nan"), float("nan")
+        live = set(p.live)
+        rows = [(r, ph, w) for r, ph, w in zip(p.robots, p.phase, p.workload, strict=True)
+                if r in live]
         ep, ew = [], []
-        for a, b in zip(ids, ids[1:], strict=False):
-            sa, sb = self.states[a], self.states[b]
-            d = (sb.phase - sa.phase + math.pi) % (2 * math.pi) - math.pi
-            ep.append(abs(d))
-            ew.append(abs(sb.workload - sa.workload))
+        for (_, pa, wa), (_, pb, wb) in zip(rows, rows[1:], strict=False):
+            ep.append(abs((pb - pa + math.pi) % (2 * math.pi) - math.pi))
+            ew.append(abs(wb - wa))
         mean = lambda xs: sum(xs) / len(xs) if xs else float("nan")  # noqa: E731
         return mean(ep), mean(ew)
 
@@ -346,33 +346,43 @@ def _watch(args: argparse.Namespace, group: ProcessGroup, monitor: Monitor, worl
     last_print = time.monotonic()
     last_t, last_wall = 0.0, time.monotonic()
     tty = sys.stdout.isatty()
+    every = args.progress_every if args.progress_every is not None else 1.0 if tty else 5.0
     while world.alive():
         if injector.wake.wait(0.2):
             for line in injector.fire_due():  # shown even when quiet: it changes the run
                 print(("\n" if tty else "") + "btrack sim: " + line, flush=True)
         if world.proc.poll() is not None:
             break
-        if not recorder.alive() and recorder.proc.returncode == 0:
-            monitor.drain()  # the recorder ends by itself once it has the final tick
-            if monitor.tick is not None and monitor.tick.done:
-                continue
+        if not recorder.alive() and recorder.proc.returncode == 0 and _finished(recorder):
+            continue  # the recorder ends by itself once it has the final tick
         dead = injector.unexpected_exit() or (None if recorder.alive() else recorder) or next(
             (c for c in vital if not c.alive()), None)
         if dead is not None:
             return _fail(group, dead, "exited early")
-        monitor.drain()
         now = time.monotonic()
-        if not args.quiet and monitor.tick and now - last_print >= (1.0 if tty else 5.0):
-            t = monitor.tick.t
+        if args.quiet or now - last_print < every:
+            continue
+        monitor.ask()
+        if monitor.progress is not None:
+            t = monitor.progress.t
             speed = (t - last_t) / (now - last_wall) if now > last_wall else 0.0
             ep, ew = monitor.errors()
             line = (f"t = {t:7.1f} / {args.duration:g} s  {speed:6.1f}x real time  "
-                    f"|e_phi| {ep:.3f} rad  |e_psi| {ew:.3f} m^2  live {monitor.tick.live}")
+                    f"|e_phi| {ep:.3f} rad  |e_psi| {ew:.3f} m^2  live {monitor.progress.live}")
             print("\r" + line if tty else line, end="" if tty else "\n", flush=True)
             last_print, last_t, last_wall = now, t, now
     if world.proc.returncode != 0:
         return _fail(group, world, "failed")
     return 0
+
+
+def _finished(recorder: Child) -> bool:
+    """Whether the recorder, having exited, said it recorded the run's final tick."""
+    try:
+        lines = recorder.stdout_path.read_text().strip().splitlines()
+        return bool(lines) and bool(json.loads(lines[-1]).get("done"))
+    except (OSError, ValueError, AttributeError):
+        return False
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -3,7 +3,8 @@
 Messages wait in a Zenoh FIFO channel that the main thread empties in batches
 through ``recorder.writer.Recording``, stamping each with the wall clock as it is
 taken (no Python callback per message); liveliness changes, rare, come through a
-callback and a queue. The process stops once it has
+callback and a queue. A queryable answers how far the run has got (``Progress``), so
+the launcher's progress lines cost no message per tick. The process stops once it has
 written a Tick with ``done=True`` (after a short drain for messages in flight) or
 on SIGTERM/SIGINT, and always leaves a finished, readable MCAP file.
 """
@@ -23,6 +24,7 @@ from typing import Any
 import zenoh
 
 from recorder.writer import Recording, RunWriter
+from wire.codec import encode
 from wire.keys import Keys
 from wire.session import SessionOptions, add_session_args, bounded_session, options_from_args
 
@@ -75,16 +77,27 @@ def run(out: Path, opts: SessionOptions, drain_s: float = 0.3) -> dict[str, int]
             alive_sub = session.liveliness().declare_subscriber(
                 keys.alive("*"), on_alive, history=True
             )
+            progress_q = session.declare_queryable(
+                keys.progress(), lambda query: _answer_progress(query, recording))
             token = session.liveliness().declare_token(keys.alive_recorder())
             try:
                 _drain_loop(subscriber, inbox, recording, keys, stop, drain_s)
             finally:
                 token.undeclare()
+                progress_q.undeclare()
                 alive_sub.undeclare()
                 subscriber.undeclare()
     finally:
         writer.close()
     return recording.summary()
+
+
+def _answer_progress(query: zenoh.Query, recording: Recording) -> None:
+    """On a Zenoh thread: the run so far, for a launcher's progress line. Nothing is
+    sent per tick: a launcher asks when it prints."""
+    progress = recording.progress()
+    if progress is not None:
+        query.reply(query.key_expr, encode(progress))
 
 
 def _drain_loop(

@@ -17,7 +17,7 @@ from mcap.writer import CompressionType, Writer
 
 from recorder import topics
 from wire.codec import DecodeError, decode
-from wire.messages import Tick
+from wire.messages import AgentState, Progress, Tick
 
 _dumps = json.JSONEncoder(separators=(",", ":"), allow_nan=False).encode
 
@@ -64,6 +64,9 @@ class RunWriter:
             self._stream.close()
 
 
+RECENT_TICKS = 8  # each robot's states kept, by tick, for progress
+
+
 class Recording:
     """Decode payloads by topic and write them to a ``RunWriter``; count what fails."""
 
@@ -74,6 +77,11 @@ class Recording:
         self.done = False  # a Tick with done=True has been written
         self.last_t_ns = 0  # the latest simulation time seen, for messages without one
         self._routes: dict[str, tuple[type | None, int]] = {}
+        # For progress: each robot's recent states by tick, and the latest tick with the
+        # states of that tick (or the latest before it), a consistent picture. The pair
+        # is read from a Zenoh thread: replaced whole, never changed in place.
+        self._recent: dict[int, dict[int, AgentState]] = {}
+        self.latest: tuple[Tick, dict[int, AgentState]] | None = None
 
     def _route(self, topic: str) -> tuple[type | None, int]:
         cls = topics.message_type(topic)
@@ -107,8 +115,23 @@ class Recording:
             publish_ns = self.last_t_ns
         self.writer.add(cid, _dumps(fields).encode(), log_ns, publish_ns)
         self.messages += 1
-        if cls is Tick and fields["done"]:
+        if cls is Tick:
+            self._note_tick(msg)
+        elif cls is AgentState:
+            recent = self._recent.setdefault(msg.robot, {})
+            recent[msg.k] = msg
+            for old in [k for k in recent if k < msg.k - RECENT_TICKS]:
+                del recent[old]
+
+    def _note_tick(self, tick: Tick) -> None:
+        if tick.done:
             self.done = True
+        states = {}
+        for robot, recent in self._recent.items():
+            ks = [k for k in recent if k <= tick.k]
+            if ks:
+                states[robot] = recent[max(ks)]
+        self.latest = (tick, states)
 
     def _handle_unknown(self, topic: str, cid: int, payload: bytes, log_ns: int) -> None:
         try:
@@ -134,5 +157,15 @@ class Recording:
         self.writer.add(cid, _dumps({"alive": alive}).encode(), log_ns, self.last_t_ns)
         self.messages += 1
 
+    def progress(self) -> Progress | None:
+        """The run so far as recorded: the latest tick and every robot's latest phase
+        and workload; None before the first tick."""
+        if self.latest is None:
+            return None
+        tick, states = self.latest
+        robots = sorted(states)
+        return Progress(tick.t, tick.k, tick.live, tick.wall_ns, tick.done, robots,
+                        [states[r].phase for r in robots], [states[r].workload for r in robots])
+
     def summary(self) -> dict[str, int]:
-        return {"messages": self.messages, "invalid": self.invalid}
+        return {"messages": self.messages, "invalid": self.invalid, "done": self.done}

@@ -80,11 +80,13 @@ def pid_alive(pid: int) -> bool:
         return False
 
 
-def run_sim(out: Path, *extra: str, timeout: float = 400) -> subprocess.CompletedProcess[str]:
-    """``btrack sim --out OUT --quiet EXTRA...`` to its end; every process it started
+def run_sim(out: Path, *extra: str, timeout: float = 400,
+            quiet: bool = True) -> subprocess.CompletedProcess[str]:
+    """``btrack sim --out OUT [--quiet] EXTRA...`` to its end; every process it started
     is ended whatever happens."""
     proc = subprocess.Popen(
-        [sys.executable, "-m", "btrack", "sim", "--out", str(out), "--quiet", *extra],
+        [sys.executable, "-m", "btrack", "sim", "--out", str(out),
+         *(["--quiet"] if quiet else []), *extra],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
     )
     try:

@@ -8,14 +8,16 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
 
 import zenoh
 from mcap.reader import make_reader
 
 from tests.procutil import end, free_port, unique_ns
-from wire import AgentState, Keys, Tick, Truth, WorldInfo, encode
+from wire import AgentState, Keys, Progress, Tick, Truth, WorldInfo, decode, encode
 from wire.session import SessionOptions, open_session
 
 
@@ -58,6 +60,21 @@ def wait_recorder_alive(session: zenoh.Session, keys: Keys, timeout: float = 30.
         assert seen.wait(timeout), "the recorder's liveliness token never appeared"
     finally:
         sub.undeclare()
+
+
+def ask_progress(session: zenoh.Session, keys: Keys,
+                 until: Callable[[Progress], bool], timeout: float = 20.0) -> Progress:
+    """Query the recorder's progress until an answer satisfies ``until``."""
+    deadline = time.monotonic() + timeout
+    last = None
+    while time.monotonic() < deadline:
+        for reply in session.get(keys.progress(), timeout=2.0):
+            assert reply.ok is not None, reply.err
+            last = decode(Progress, reply.ok.payload.to_bytes())
+            if until(last):
+                return last
+        time.sleep(0.05)
+    raise AssertionError(f"no progress answer as wanted; the last: {last}")
 
 
 def read_topics(path: Path) -> tuple[Counter[str], dict[str, list[dict]]]:
@@ -120,12 +137,17 @@ def test_recorder_records_and_stops_on_final_tick(tmp_path: Path) -> None:
                 session.put(keys.truth(), encode(Truth(k * 0.1, k, [0], [1.0], [-1.0], [0.0])))
                 session.put(keys.state(0), encode(state(k)))
                 session.put(keys.world_tick(), encode(Tick(k * 0.1, k, [0])))
+            # asked how far the run has got, it answers from what it recorded
+            progress = ask_progress(session, keys, lambda p: p.k == 2)
+            assert (progress.t, progress.live, progress.done) == (0.2, [0], False)
+            assert (progress.robots, progress.phase, progress.workload) == ([0], [0.5], [0.6])
             session.put(keys.state(0), b"\x93\x01\x02")  # a msgpack list, not a state
             session.put(keys.world_tick(), encode(Tick(0.3, 3, [0], done=True)))
             out, err = proc.communicate(timeout=30)
             token.undeclare()
         assert proc.returncode == 0, err.decode()
-        assert json.loads(out.decode().strip().splitlines()[-1]) == {"messages": 12, "invalid": 1}
+        summary = json.loads(out.decode().strip().splitlines()[-1])
+        assert summary == {"messages": 12, "invalid": 1, "done": True}
         counts, data = read_topics(tmp_path / "run.mcap")
         assert counts["world/info"] == 1
         assert counts["world/truth"] == 3
@@ -160,5 +182,6 @@ def test_recorder_finishes_the_file_on_sigterm(tmp_path: Path) -> None:
         counts, _ = read_topics(tmp_path / "run.mcap")
         assert counts["world/tick"] == summary["messages"]
         assert counts["invalid/world/tick"] == summary["invalid"]
+        assert summary["done"] is False  # stopped before the final tick
     finally:
         end(proc)

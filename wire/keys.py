@@ -64,6 +64,10 @@ class Keys:
     def fault(self) -> str:
         return f"{self.ns}/fault"
 
+    def progress(self) -> str:
+        """The recorder's queryable: a Progress of the run so far."""
+        return f"{self.ns}/recorder/progress"
+
     def everything(self) -> str:
         return f"{self.ns}/**"
 

@@ -191,6 +191,27 @@ class Tick:
 
 
 @dataclass(frozen=True)
+class Progress:
+    """How far a run has got, as recorded (the recorder's answer to a query, for
+    progress lines): the latest Tick, and each robot's latest phase and workload as
+    its agent published them."""
+
+    t: float
+    k: int
+    live: list[int]
+    wall_ns: int  # the latest Tick's
+    done: bool
+    robots: list[int]
+    phase: list[float]
+    workload: list[float]
+
+    def check(self) -> None:
+        _require(self.t >= 0 and self.k >= 0 and self.wall_ns >= 0, "negative t, k or wall_ns")
+        _require(len(self.phase) == len(self.robots) == len(self.workload),
+                 "robots, phase and workload: one entry per robot")
+
+
+@dataclass(frozen=True)
 class WorldInfo:
     """The scenario, for the recorder and reports: edge, true patrol depth per bin,
     run parameters. Published by the world at start and every few seconds."""
