@@ -43,7 +43,7 @@ from deploy.procs import non_negative  # noqa: E402
 from report import measures as m  # noqa: E402
 from report.thesis import MAPS, PHASE_SSE_RAD, STARTS, WORKLOAD_SSE_M2, thesis_cell  # noqa: E402
 from simworld.maps import load_map  # noqa: E402
-from simworld.world import World  # noqa: E402
+from simworld.world import ODOM_NOISE, World  # noqa: E402
 
 DT_S = 0.1  # the world's tick at 10 Hz control
 ROBOTS = 3
@@ -58,7 +58,7 @@ class Case:
     seed: int
     overrides: dict[str, dict[str, Any]]
     localization: str = "truth"  # or "odometry": the agents steer by dead reckoning
-    odom_noise: float = 0.02
+    odom_noise: float = ODOM_NOISE
     odom_turn_noise: float | None = None  # None: as odom_noise (the world's default)
 
 
@@ -165,7 +165,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--localization", choices=("truth", "odometry"), default="truth",
                    help="the agents' poses: the simulator's truth, or dead reckoning "
                         "(errors are measured against truth either way)")
-    p.add_argument("--odom-noise", type=non_negative, default=0.02, metavar="F",
+    p.add_argument("--odom-noise", type=non_negative, default=ODOM_NOISE, metavar="F",
                    help="odometry distance noise, as btrack sim")
     p.add_argument("--odom-turn-noise", type=non_negative, metavar="F",
                    help="odometry turn noise (default: as --odom-noise), as btrack sim")

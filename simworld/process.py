@@ -30,7 +30,7 @@ import zenoh
 
 from simworld.laser import Laser, Scanner, box_walls
 from simworld.maps import LASER_ROOM_M, ROBOT_ROOM_M, MapError, load_map
-from simworld.world import ROBOT_RADIUS_M, World, parse_start
+from simworld.world import ODOM_NOISE, ROBOT_RADIUS_M, World, parse_start
 from wire import (
     Cmd,
     DecodeError,
@@ -107,8 +107,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--odom-noise",
         type=float,
-        default=0.02,
-        help="odometry noise: std of each step's distance, as a fraction of it (0.02)",
+        default=ODOM_NOISE,
+        help=f"odometry noise: std of each step's distance, as a fraction of it ({ODOM_NOISE})",
     )
     p.add_argument(
         "--odom-turn-noise",

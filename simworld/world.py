@@ -20,6 +20,7 @@ MARGIN_OUT_M = 0.3  # the patrol goes this far back out past the edge before tur
 START_INSIDE_M = 0.05  # phase-0 robots start a hair inside their segment
 AHEAD_PHASE = 2.0 * math.pi / 5.0
 PARKED_BEHIND_M = 0.5  # robots not in the starting team wait this far behind the start line
+ODOM_NOISE = 0.02  # odometry noise by default: std of each step's distance (and turn), fraction
 
 
 @dataclass(frozen=True)
@@ -83,7 +84,7 @@ class World:
         n: int,
         start: str = "in-phase",
         seed: int = 1,
-        odom_noise: float = 0.02,
+        odom_noise: float = ODOM_NOISE,
         team: int | None = None,
         odom_turn_noise: float | None = None,
     ) -> None:
