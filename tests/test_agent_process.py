@@ -6,7 +6,11 @@ from __future__ import annotations
 
 import math
 import queue
+import subprocess
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
 
 import msgpack
 import pytest
@@ -30,9 +34,17 @@ def neighbour_state(robot: int, k: int, lo: float, hi: float) -> AgentState:
                       upper=-1 if robot == 2 else 1, edge_lo=0.0, edge_hi=6.0)
 
 
-def hear_robot1(session: zenoh.Session, keys: Keys) -> tuple[
-        queue.SimpleQueue[AgentState], queue.SimpleQueue[Cmd], queue.SimpleQueue[str]]:
-    """Queues of what agent 1 publishes: its states, its commands, its liveliness."""
+@contextmanager
+def agent1(bus: tuple[str, int, zenoh.Session], log: Path, neighbours: tuple[int, ...] = (),
+           *extra: str) -> Iterator[tuple[subprocess.Popen[bytes], Keys,
+                                          queue.SimpleQueue[AgentState],
+                                          queue.SimpleQueue[Cmd]]]:
+    """Agent 1 of a team of three, a real process on the test's bus, once it is alive;
+    the test holds the liveliness tokens of ``neighbours`` and plays the world. Yields
+    the process, the keys, and queues of agent 1's states and commands; ends the agent
+    and checks that it exited cleanly."""
+    ns, port, session = bus
+    keys = Keys(ns)
     states: queue.SimpleQueue[AgentState] = queue.SimpleQueue()
     cmds: queue.SimpleQueue[Cmd] = queue.SimpleQueue()
     alive: queue.SimpleQueue[str] = queue.SimpleQueue()
@@ -41,7 +53,16 @@ def hear_robot1(session: zenoh.Session, keys: Keys) -> tuple[
     )
     session.declare_subscriber(keys.cmd(1), lambda s: cmds.put(decode(Cmd, s.payload.to_bytes())))
     session.liveliness().declare_subscriber(keys.alive(1), lambda s: alive.put(str(s.kind)))
-    return states, cmds, alive
+    tokens = [session.liveliness().declare_token(keys.alive(i)) for i in neighbours]
+    proc = start(["agent", "--id", "1", "--robots", "3", *extra, *member_args(ns, port)], log)
+    try:
+        alive.get(timeout=30)
+        yield proc, keys, states, cmds
+    finally:
+        end(proc)
+        for tok in tokens:
+            tok.undeclare()
+    assert proc.returncode == 0, log.read_text()
 
 
 def sense_and_pose(session: zenoh.Session, keys: Keys, k: int, x: float = 3.0) -> None:
@@ -52,18 +73,13 @@ def sense_and_pose(session: zenoh.Session, keys: Keys, k: int, x: float = 3.0) -
 
 
 def test_agent_survives_garbage_and_counts_it(bus, tmp_path):
-    ns, port, session = bus
-    keys = Keys(ns)
-    states, cmds, alive = hear_robot1(session, keys)
+    session = bus[2]
     # The test plays both neighbours (ids 0 and 2) and the world.
-    tokens = [session.liveliness().declare_token(keys.alive(i)) for i in (0, 2)]
-    enc = zenoh.Encoding(MSGPACK)
-    pub0 = session.declare_publisher(keys.state(0), encoding=enc)
-    pub2 = session.declare_publisher(keys.state(2), encoding=enc)
-    proc = start(["agent", "--id", "1", "--robots", "3", "--neighbour-timeout", "0.3",
-                  *member_args(ns, port)], tmp_path / "agent.log")
-    try:
-        alive.get(timeout=30)
+    with agent1(bus, tmp_path / "agent.log", (0, 2), "--neighbour-timeout", "0.3") as (
+            proc, keys, states, cmds):
+        enc = zenoh.Encoding(MSGPACK)
+        pub0 = session.declare_publisher(keys.state(0), encoding=enc)
+        pub2 = session.declare_publisher(keys.state(2), encoding=enc)
 
         def tick(k: int) -> tuple[Cmd, AgentState]:
             if k > 0:  # the neighbours' states of the previous tick
@@ -97,11 +113,6 @@ def test_agent_survives_garbage_and_counts_it(bus, tmp_path):
         assert state.dropped == len(bad)
         assert math.isfinite(cmd.v) and math.isfinite(cmd.omega)
         assert 0.0 <= state.phase < 2 * math.pi and state.lo < state.hi
-    finally:
-        end(proc)
-        for tok in tokens:
-            tok.undeclare()
-    assert proc.returncode == 0, (tmp_path / "agent.log").read_text()
 
 
 def test_agent_restarted_in_a_running_team_claims_between_its_neighbours(bus, tmp_path):
@@ -110,15 +121,9 @@ def test_agent_restarted_in_a_running_team_claims_between_its_neighbours(bus, tm
     the upper one's. Under load a neighbour's state of the very tick the joiner is on
     can be the first it hears of it (that neighbour was quicker): it counts as heard,
     and the claim never runs past it to the end of the edge."""
-    ns, port, session = bus
-    keys = Keys(ns)
-    states, cmds, alive = hear_robot1(session, keys)
-    tokens = [session.liveliness().declare_token(keys.alive(i)) for i in (0, 2)]
-    proc = start(["agent", "--id", "1", "--robots", "3", "--neighbour-timeout", "0.3",
-                  *member_args(ns, port)], tmp_path / "agent.log")
-
-    try:
-        alive.get(timeout=30)
+    session = bus[2]
+    with agent1(bus, tmp_path / "agent.log", (0, 2), "--neighbour-timeout", "0.3") as (
+            _, keys, states, cmds):
         sense_and_pose(session, keys, 500)  # a running team's tick; no neighbour heard yet
         cmd = cmds.get(timeout=10)
         assert (cmd.k, cmd.v, cmd.omega) == (500, 0.0, 0.0)  # standing still
@@ -130,24 +135,14 @@ def test_agent_restarted_in_a_running_team_claims_between_its_neighbours(bus, tm
         state = states.get(timeout=10)
         assert state.k == 501 and (state.lower, state.upper) == (0, 2)
         assert (state.lo, state.hi) == pytest.approx((1.0, 4.5))
-    finally:
-        end(proc)
-        for tok in tokens:
-            tok.undeclare()
-    assert proc.returncode == 0, (tmp_path / "agent.log").read_text()
 
 
 def test_agent_restarted_hearing_nobody_yet_stands_still_before_claiming_alone(bus, tmp_path):
     """A restarted agent's first Sense can come before it has heard who is alive. It
     stands still rather than claim the whole edge at once; only after JOIN_WAIT_S
     (1 s) with nobody heard does it take the edge as a team of one."""
-    ns, port, session = bus
-    keys = Keys(ns)
-    states, cmds, alive = hear_robot1(session, keys)
-    proc = start(["agent", "--id", "1", "--robots", "3", *member_args(ns, port)],
-                 tmp_path / "agent.log")
-    try:
-        alive.get(timeout=30)
+    session = bus[2]
+    with agent1(bus, tmp_path / "agent.log") as (_, keys, states, cmds):
         for k in (500, 501):
             sense_and_pose(session, keys, k)
             assert (cmds.get(timeout=10).v, states.empty()) == (0.0, True)
@@ -155,21 +150,14 @@ def test_agent_restarted_hearing_nobody_yet_stands_still_before_claiming_alone(b
         sense_and_pose(session, keys, 502)
         state = states.get(timeout=10)
         assert (state.k, state.lower, state.upper, state.lo, state.hi) == (502, -1, -1, 0.0, 6.0)
-    finally:
-        end(proc)
-    assert proc.returncode == 0, (tmp_path / "agent.log").read_text()
 
 
 def test_agent_acts_on_a_sense_that_carries_its_pose(bus, tmp_path):
     """As the simulator sends it with truth or odometry poses: one message per tick, no
     Pose message. The agent acts on each tick, on the pose in it."""
-    ns, port, session = bus
-    keys = Keys(ns)
-    states, cmds, alive = hear_robot1(session, keys)
-    proc = start(["agent", "--id", "1", "--robots", "3", "--neighbour-timeout", "0.3",
-                  *member_args(ns, port)], tmp_path / "agent.log")
-    try:
-        alive.get(timeout=30)
+    session = bus[2]
+    with agent1(bus, tmp_path / "agent.log", (), "--neighbour-timeout", "0.3") as (
+            _, keys, states, cmds):
         for k in range(3):
             x = 2.5 + 0.25 * k
             session.put(keys.sense(1), encode(Sense(
@@ -181,8 +169,6 @@ def test_agent_acts_on_a_sense_that_carries_its_pose(bus, tmp_path):
             # alone, it patrols the whole edge; its phase is where that pose puts it
             assert (state.lo, state.hi, state.direction) == (0.0, 6.0, 1)
             assert state.phase == pytest.approx(math.pi * x / 6.0)
-    finally:
-        end(proc)
 
 
 def test_agent_refuses_unstable_gains(tmp_path):
