@@ -22,6 +22,7 @@ from pathlib import Path
 import zenoh
 
 from agent.controller import Gains
+from agent.phase import wrap_pi
 from agent.stability import check_gains
 from deploy import faults
 from deploy.procs import (
@@ -142,11 +143,11 @@ class Monitor:
         if p is None:
             return float("nan"), float("nan")
         live = set(p.live)
-        rows = [(r, ph, w) for r, ph, w in zip(p.robots, p.phase, p.workload, strict=True)
+        rows = [(ph, w) for r, ph, w in zip(p.robots, p.phase, p.workload, strict=True)
                 if r in live]
         ep, ew = [], []
-        for (_, pa, wa), (_, pb, wb) in zip(rows, rows[1:], strict=False):
-            ep.append(abs((pb - pa + math.pi) % (2 * math.pi) - math.pi))
+        for (pa, wa), (pb, wb) in zip(rows, rows[1:], strict=False):
+            ep.append(abs(wrap_pi(pb - pa)))
             ew.append(abs(wb - wa))
         mean = lambda xs: sum(xs) / len(xs) if xs else float("nan")  # noqa: E731
         return mean(ep), mean(ew)
