@@ -65,6 +65,16 @@ def agent1(bus: tuple[str, int, zenoh.Session], log: Path, neighbours: tuple[int
     assert proc.returncode == 0, log.read_text()
 
 
+def when_subscribed(*pubs: zenoh.Publisher, timeout_s: float = 10.0) -> None:
+    """Wait until the agent's subscription reaches each publisher: it subscribes to a
+    neighbour's states once it learns that the neighbour is alive, which can be after
+    its first tick, and a put made before that reaches nobody."""
+    deadline = time.monotonic() + timeout_s
+    while not all(p.matching_status.matching for p in pubs):
+        assert time.monotonic() < deadline, "the agent never subscribed to its neighbours"
+        time.sleep(0.01)
+
+
 def sense_and_pose(session: zenoh.Session, keys: Keys, k: int, x: float = 3.0) -> None:
     """The world's part of tick k for robot 1: its Sense, then its Pose."""
     session.put(keys.sense(1), encode(Sense(k * 0.1, k, 1, False, False, 0.0, 0.0, 0.0, 6.0,
@@ -80,6 +90,7 @@ def test_agent_survives_garbage_and_counts_it(bus, tmp_path):
         enc = zenoh.Encoding(MSGPACK)
         pub0 = session.declare_publisher(keys.state(0), encoding=enc)
         pub2 = session.declare_publisher(keys.state(2), encoding=enc)
+        when_subscribed(pub0, pub2)
 
         def tick(k: int) -> tuple[Cmd, AgentState]:
             if k > 0:  # the neighbours' states of the previous tick
@@ -129,8 +140,12 @@ def test_agent_restarted_in_a_running_team_claims_between_its_neighbours(bus, tm
         assert (cmd.k, cmd.v, cmd.omega) == (500, 0.0, 0.0)  # standing still
         assert states.empty()
         # Tick 501: robot 0 was quick and its state of 501 itself is here; robot 2's of 500.
-        session.put(keys.state(0), encode(neighbour_state(0, 501, 0.0, 2.0)))
-        session.put(keys.state(2), encode(neighbour_state(2, 500, 3.0, 6.0)))
+        enc = zenoh.Encoding(MSGPACK)
+        pub0 = session.declare_publisher(keys.state(0), encoding=enc)
+        pub2 = session.declare_publisher(keys.state(2), encoding=enc)
+        when_subscribed(pub0, pub2)
+        pub0.put(encode(neighbour_state(0, 501, 0.0, 2.0)))
+        pub2.put(encode(neighbour_state(2, 500, 3.0, 6.0)))
         sense_and_pose(session, keys, 501)
         state = states.get(timeout=10)
         assert state.k == 501 and (state.lower, state.upper) == (0, 2)
