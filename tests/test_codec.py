@@ -28,6 +28,15 @@ def test_cmd_round_trip(t, k, robot, v, omega):
 
 def test_state_round_trip():
     assert decode(AgentState, encode(state())) == state()
+    shared = state(turns=31.4, end_bins=[19, 20, 21], end_depths=[1.5, 1.5, 0.3])
+    assert decode(AgentState, encode(shared)) == shared
+
+
+def test_state_without_sweep_count_or_end_depths_still_decodes():
+    old = {k: v for k, v in state().__dict__.items()
+           if k not in ("turns", "end_bins", "end_depths")}
+    msg = decode(AgentState, msgpack.packb(old))
+    assert msg.turns == 0.0 and msg.end_bins == [] and msg.end_depths == []
 
 
 def test_ints_accepted_for_floats():
@@ -49,6 +58,12 @@ def test_ints_accepted_for_floats():
         (msgpack.packb({k: v for k, v in state().__dict__.items() if k != "phase"}), "missing"),
         (msgpack.packb({**state().__dict__, "evil": 1}), "unknown field"),
         (msgpack.packb({**state().__dict__, "k": True}), "expected an integer"),
+        (msgpack.packb({**state().__dict__, "end_bins": [1, 2], "end_depths": [0.3]}),
+         "as long as"),
+        (msgpack.packb({**state().__dict__, "end_bins": [1], "end_depths": [-0.3]}),
+         "negative depth"),
+        (msgpack.packb({**state().__dict__, "end_bins": [1.5], "end_depths": [0.3]}),
+         "expected an integer"),
     ],
 )
 def test_bad_payloads_refused_with_reason(payload, reason):

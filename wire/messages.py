@@ -160,10 +160,20 @@ class AgentState:
     edge_lo: float
     edge_hi: float
     dropped: int = 0  # malformed messages this agent has counted and dropped so far
+    # phi_des unwrapped, rad: the team's count of sweeps, which sets the grid of pass
+    # lines every robot shares; a robot takes its lower neighbour's
+    turns: float = 0.0
+    # The depths (m) it measured of the 0.1 m bins (indices from edge_lo) near its two
+    # ends: a neighbour uses them for bins it has not measured itself.
+    end_bins: list[int] = field(default_factory=list)
+    end_depths: list[float] = field(default_factory=list)
 
     def check(self) -> None:
         _require(self.t >= 0 and self.k >= 0 and self.robot >= 0, "negative t, k or robot")
         _require(self.dropped >= 0, "negative dropped count")
+        _require(len(self.end_bins) == len(self.end_depths),
+                 "end_bins and end_depths must be as long as each other")
+        _require(all(d >= 0 for d in self.end_depths), "negative depth")
         _require(self.edge_lo <= self.lo < self.hi <= self.edge_hi, "boundaries outside the edge")
         _require(0.0 <= self.phase < TWO_PI, "phase outside [0, 2 pi)")
         _require(0.0 <= self.phase_des < TWO_PI, "phase_des outside [0, 2 pi)")
