@@ -16,22 +16,24 @@ from agent.phase import (
     consensus_term,
     desired_phase_step,
     limit_lead,
-    patrol_speed,
+    pass_speed,
     position_to_phase,
+    wrap_pi,
 )
+
+SHARED_REACH_M = 0.3  # a robot tells its neighbours its depths this close to its ends
 
 
 @dataclass(frozen=True)
 class Gains:
     k_s: float = 0.01  # boundary step per m^2 of workload error per tick (eq. 4.3)
     k_phi: float = 0.3  # phase consensus gain per tick (eq. 4.7); < 1/2 is stable for any n
-    k_v: float = 5.0  # forward speed per rad of phase lag, m/s/rad (eq. 4.10)
     cycle_s: float = 200.0  # period of the common cycle: phi_dot_des = 2 pi / cycle_s
     max_lead_rad: float = 1.0  # the desired phase stays this close to the actual one
     min_segment_m: float = 0.3
 
     def __post_init__(self) -> None:
-        if self.k_s <= 0 or self.k_phi <= 0 or self.k_v <= 0:
+        if self.k_s <= 0 or self.k_phi <= 0:
             raise ValueError("gains must be positive")
         if self.cycle_s <= 0 or self.max_lead_rad <= 0 or self.min_segment_m <= 0:
             raise ValueError("cycle_s, max_lead_rad and min_segment_m must be positive")
@@ -56,6 +58,8 @@ class Neighbour:
     hi: float
     phase_des: float
     workload: float
+    turns: float = 0.0  # its desired phase unwrapped, rad: the team's sweep count
+    depths: tuple[tuple[int, float], ...] = ()  # (bin, depth) it measured near its ends
 
 
 @dataclass(frozen=True)
@@ -70,6 +74,8 @@ class Output:
     depth_avg: float
     direction: int
     motion: Motion
+    turns: float = 0.0  # phi_des unwrapped, rad
+    end_depths: tuple[tuple[int, float], ...] = ()  # its depths near its ends
 
 
 def wheel_limited(v: float, omega: float, limits: RobotLimits) -> tuple[float, float]:
@@ -108,6 +114,7 @@ class Controller:
         self.depth_map = DepthMap(edge_lo, cfg.bin_m, cfg.min_depth_m)
         self.patrol = Patrol(cfg, self.depth_map, x, direction=1)
         self.phase_des: float | None = None
+        self.turns = 0.0  # phi_des unwrapped: the count of sweeps the pass grid walks by
         self.published: Neighbour | None = None  # what we told the neighbours last tick
 
     def _update_boundaries(self, lower: Neighbour | None, upper: Neighbour | None,
@@ -152,7 +159,11 @@ class Controller:
         previous tick, or None if not heard yet."""
         g = self.gains
         old = (self.lo, self.hi)
+        for nb in (lower, upper):
+            if nb is not None:
+                self.depth_map.learn(nb.depths)
         self._update_boundaries(lower, upper, has_lower, has_upper)
+        before = self.phase_des
         steer = self.patrol.step(x, y, theta, ice, algae, self.lo, self.hi)
         direction = self.patrol.direction
         phase = position_to_phase(x, self.lo, self.hi, direction)
@@ -169,17 +180,40 @@ class Controller:
             )
             self.phase_des = desired_phase_step(mine, g.phase_rate, dt, shift, consensus)
         self.phase_des = limit_lead(self.phase_des, phase, g.max_lead_rad)
+        self._count_turns(before, lower if has_lower else None)
         on_leg = steer.motion in (Motion.ENTER, Motion.UNDER, Motion.EXIT)
-        v = patrol_speed(self.phase_des, phase, on_leg, steer.measuring, g.k_v,
-                         self.limits.v_max, self.patrol.config.measure_speed)
+        p = self.patrol
+        v = pass_speed(
+            self.phase_des, phase,
+            position_to_phase(p.arc_from[0], self.lo, self.hi, p.arc_from[1]),
+            position_to_phase(p.line_x, self.lo, self.hi, p.direction),
+            on_leg, steer.measuring, p.turned > 0.05, self.limits.v_max,
+            p.config.measure_speed,
+        )
         v, omega = wheel_limited(v, v * steer.curvature, self.limits)
         depth_avg = self.depth_map.average(self.lo, self.hi)
         workload = depth_avg * (self.hi - self.lo)
-        self.published = Neighbour(self.robot, self.lo, self.hi, self.phase_des, workload)
+        ends = self.depth_map.near_ends(self.lo, self.hi, SHARED_REACH_M)
+        self.published = Neighbour(self.robot, self.lo, self.hi, self.phase_des, workload,
+                                   self.turns, ends)
         return Output(
             v, omega, self.lo, self.hi, phase, self.phase_des, workload, depth_avg,
-            direction, steer.motion,
+            direction, steer.motion, self.turns, ends,
         )
+
+    def _count_turns(self, before: float | None, lower: Neighbour | None) -> None:
+        """Unwrap the desired phase into the sweep clock the pass grid walks by. A
+        robot takes its lower neighbour's count (the chain agrees from its lowest live
+        robot up, a robot restarted in a running team included) and counts on its own
+        without one."""
+        assert self.phase_des is not None
+        if lower is not None:
+            self.turns = lower.turns + wrap_pi(self.phase_des - lower.phase_des)
+        elif before is None:
+            self.turns = self.phase_des
+        else:
+            self.turns += wrap_pi(self.phase_des - before)
+        self.patrol.clock = self.turns / math.pi
 
 
 def initial_segment(robot: int, team: int, edge_lo: float, edge_hi: float) -> tuple[float, float]:

@@ -11,8 +11,9 @@ the edge (if the ice never ends, after ``max_depth_m`` plus ``max_search_m``);
 (5) TURN_OUT: another 180 degree arc. Each arc moves the robot one pass
 along the edge, towards ``hi`` or ``lo``; the direction reverses when the next pass
 would leave the segment. Every robot makes the same number of passes per sweep
-(the pass spacing scales with its segment), so robots with equal work step their
-phases together.
+(the pass spacing scales with its segment), and the pass lines of every robot sit on
+one grid of phases, set by the team's sweep count: so robots with equal work step
+their phases together, level with each other.
 """
 
 from __future__ import annotations
@@ -27,6 +28,15 @@ HALF_PI = 0.5 * math.pi
 FIRST_PASS_CANDIDATES = 24  # offsets tried for the first pass of a sweep
 FIRST_PASS_MIN, FIRST_PASS_SPAN = 0.3, 1.7  # its length, in passes: 0.3 to 2
 INTERIOR = 0.3  # a pass line within this fraction of a bin from its centre samples it
+SIDE_M = 0.015  # a sample this close to a bin's side may be of the next column
+GOLDEN = 0.6180339887
+EDGE_POOL_BINS = 2  # the ice edge at a bin: the crossings of this many bins either side
+KEEP_CROSSINGS = 16  # per bin
+# How much a depth sample is worth: a leg that crossed the algae's end slowly, measured
+# from a well-known ice edge; one that crossed it at full speed (a tick is 5 cm: an
+# out-leg in a column its map has no depth for); one taken on a bin's side, which
+# may be the next column's. A bin keeps samples of its best kind.
+SUSPECT, ROUGH, PRECISE = 0, 1, 2
 
 
 class Motion(Enum):
@@ -44,7 +54,7 @@ class PatrolConfig:
     max_depth_m: float = 5.0  # turn back regardless, in case a sensor fails
     max_search_m: float = 2.0  # how far in to look for the edge before giving up
     passes_per_sweep: int = 16
-    min_turn_radius_m: float = 0.04
+    min_turn_radius_m: float = 0.035
     max_turn_radius_m: float = 0.2
     heading_gain: float = 4.0  # curvature per rad of heading error, 1/m
     line_gain: float = 3.0  # heading correction per m off the pass line, rad/m
@@ -52,7 +62,9 @@ class PatrolConfig:
     bin_m: float = 0.1  # resolution of the depth map
     end_inset_m: float = 0.05  # the last pass of a sweep stays this far inside the segment
     measure_zone_m: float = 0.08  # slow down this close to the depth the map expects
-    measure_speed: float = 0.1  # m/s at least there (1 cm of depth per 10 Hz tick)
+    measure_speed: float = 0.1  # m/s there (1 cm of depth per 10 Hz tick)
+    edge_zone_m: float = 0.08  # slow down this close before a known edge (ice, algae out)
+    turn_margin_m: float = 0.05  # turn under the ice this far past the next pass's algae
 
     def __post_init__(self) -> None:
         if self.passes_per_sweep < 1:
@@ -64,14 +76,18 @@ class PatrolConfig:
             raise ValueError("depths, margin, search distance and bin must be positive")
         if self.measure_zone_m < 0 or self.measure_speed <= 0:
             raise ValueError("measure_zone_m must be >= 0 and measure_speed positive")
+        if self.edge_zone_m < 0 or self.turn_margin_m < 0:
+            raise ValueError("edge_zone_m and turn_margin_m must be >= 0")
 
 
 @dataclass
 class DepthMap:
-    """Patrol depth the robot measured at each bin along the edge: the median of the
-    last ``keep`` samples, so one leg that strayed across a column boundary (and
-    measured its neighbour) does not move the workload, and a changed profile is
-    followed within two passes."""
+    """Patrol depth the robot measured at each bin along the edge: the mean of the
+    last ``keep`` samples of the bin's best kind (PRECISE, ROUGH, SUSPECT) but the
+    highest and lowest, so one leg that strayed across a column boundary (and measured
+    its neighbour) does not move the workload, and a changed profile is followed within
+    a few passes. Depths are measured from the ice edge where the robot's in-legs
+    crossed it, averaged over many crossings."""
 
     edge_lo: float
     bin_m: float
@@ -81,23 +97,97 @@ class DepthMap:
     samples: dict[int, list[float]] = field(default_factory=dict)
     recorded: int = 0  # samples recorded so far, over all bins
     last_seen: dict[int, int] = field(default_factory=dict)  # bin -> ``recorded`` then
+    kind: dict[int, int] = field(default_factory=dict)  # bin -> the kind of its samples
+    # Depths the neighbours measured near the ends they share with this robot: a bin
+    # this robot has not measured itself (a sliver at its segment's end, or one the
+    # boundary just handed over) takes the neighbour's value, not its nearest own bin's.
+    shared: dict[int, float] = field(default_factory=dict)
+    crossings: dict[int, list[float]] = field(default_factory=dict)  # edge y per bin
 
     def bin_of(self, s: float) -> int:
         return int(math.floor((s - self.edge_lo) / self.bin_m))
 
-    def record(self, s: float, depth: float) -> None:
+    def record(self, s: float, depth: float, kind: int = PRECISE) -> None:
+        """A depth sample at ``s``; ROUGH for one taken at full speed. It counts for
+        less (SUSPECT) within SIDE_M of a bin's side."""
         b = self.bin_of(s)
-        recent = self.samples.setdefault(b, [])
+        offset = s - self.edge_lo - b * self.bin_m
+        if min(offset, self.bin_m - offset) < SIDE_M:
+            kind = SUSPECT
+        best = self.kind.get(b, -1)
+        if kind < best:
+            return
+        if kind > best:
+            self.samples[b] = []
+            self.kind[b] = kind
+        recent = self.samples[b]
         recent.append(depth)
         del recent[: -self.keep]
-        self.depths[b] = sorted(recent)[len(recent) // 2]
+        ordered = sorted(recent)
+        if len(ordered) >= 3:
+            ordered = ordered[1:-1]
+        self.depths[b] = sum(ordered) / len(ordered)
         self.recorded += 1
-        self.last_seen[b] = self.recorded
+        if kind > SUSPECT:
+            self.last_seen[b] = self.recorded
+
+    def known(self, b: int) -> bool:
+        """Whether bin ``b``'s depth is measured (not only on its side) or shared."""
+        return self.kind.get(b, SUSPECT) > SUSPECT or b in self.shared
+
+    def cross(self, s: float, y: float) -> None:
+        """An in-leg crossed the ice edge at ``y`` (the middle of the ticks around it)."""
+        seen = self.crossings.setdefault(self.bin_of(s), [])
+        seen.append(y)
+        del seen[:-KEEP_CROSSINGS]
+
+    def edge_y(self, s: float) -> float | None:
+        """The ice edge at ``s``: the mean of the crossings near it, None if none yet.
+        One crossing is known to half a tick of the speed it was made at; their mean,
+        made at every offset from the ticks, far better."""
+        b = self.bin_of(s)
+        seen = [y for k in range(b - EDGE_POOL_BINS, b + EDGE_POOL_BINS + 1)
+                for y in self.crossings.get(k, ())]
+        return sum(seen) / len(seen) if seen else None
+
+    def learn(self, depths: tuple[tuple[int, float], ...]) -> None:
+        """A neighbour's published depths of the bins near its ends."""
+        for b, depth in depths:
+            self.shared[b] = depth
+
+    def near_ends(self, lo: float, hi: float, reach_m: float) -> tuple[tuple[int, float], ...]:
+        """This robot's own measured depths of the bins within ``reach_m`` of either end
+        of [lo, hi], for its neighbours."""
+        spans = ((lo - reach_m, lo + reach_m), (hi - reach_m, hi + reach_m))
+        bins = {b for a, z in spans for b in range(self.bin_of(a), self.bin_of(z) + 1)}
+        return tuple((b, self.depths[b]) for b in sorted(bins)
+                     if self.kind.get(b, SUSPECT) > SUSPECT)
+
+    def gap(self, lo: float, hi: float, tolerance_m: float = 0.02) -> bool:
+        """Whether a bin inside [lo, hi] is not known and that matters: the nearest
+        known bins either side of it differ by more than ``tolerance_m``."""
+        first = self.bin_of(lo + 0.5 * self.bin_m)
+        last = self.bin_of(hi - 0.5 * self.bin_m)
+
+        def value(k: int) -> float | None:
+            return self.depths.get(k, self.shared.get(k)) if self.known(k) else None
+
+        for b in range(first, last + 1):
+            if self.known(b):
+                continue
+            below = next((v for k in range(b - 1, first - 2, -1)
+                          if (v := value(k)) is not None), None)
+            above = next((v for k in range(b + 1, last + 2)
+                          if (v := value(k)) is not None), None)
+            if below is not None and above is not None and abs(below - above) > tolerance_m:
+                return True
+        return False
 
     def staleness(self, s: float) -> int:
         """Samples recorded elsewhere since the bin at ``s`` was last sampled; a bin
-        never sampled counts as staler than any sampled one. A line near a bin's side
-        counts for nothing: a leg there wobbles across two columns and measures neither."""
+        never sampled (but on its side) counts as staler than any sampled one. A line
+        near a bin's side counts for nothing: a leg there wobbles across two columns and
+        measures neither."""
         b = self.bin_of(s)
         if abs(s - self.edge_lo - (b + 0.5) * self.bin_m) > INTERIOR * self.bin_m:
             return 0
@@ -106,7 +196,8 @@ class DepthMap:
 
     def average(self, lo: float, hi: float) -> float:
         """d_a over [lo, hi]: length-weighted mean of the measured profile, each bin
-        not measured taking its nearest measured bin; ``default_m`` if none is."""
+        not measured taking a neighbour's value for it, else its nearest measured bin;
+        ``default_m`` if none is."""
         if not self.depths or hi <= lo:
             return self.default_m
         known = sorted(self.depths)
@@ -121,7 +212,10 @@ class DepthMap:
                 continue
             while j + 1 < len(known) and abs(known[j + 1] - b) <= abs(known[j] - b):
                 j += 1
-            total += (b_hi - b_lo) * self.depths[known[j]]
+            depth = self.depths.get(b)
+            if depth is None:
+                depth = self.shared.get(b, self.depths[known[j]])
+            total += (b_hi - b_lo) * depth
         return total / (hi - lo)
 
 
@@ -131,11 +225,12 @@ class Steer:
 
     curvature: float
     motion: Motion
-    measuring: bool = False  # near where this leg expects the algae to end: go slow
+    measuring: bool = False  # near an edge this leg measures: go slow
 
 
 class Patrol:
-    """The lawnmower state machine. Pure: feed it pose and sensing each tick."""
+    """The lawnmower state machine. Pure: feed it pose and sensing each tick, and the
+    team's sweep clock (``clock``: the unwrapped desired phase over pi) when known."""
 
     def __init__(self, config: PatrolConfig, depth_map: DepthMap, x: float, direction: int = 1):
         self.config = config
@@ -143,12 +238,16 @@ class Patrol:
         self.motion = Motion.ENTER
         self.direction = 1 if direction >= 0 else -1
         self.line_x = x  # the pass line the straight legs hold
+        self.arc_from = (x, self.direction)  # the line and direction the last arc left
+        self.x = x  # where the robot is
+        self.clock: float | None = None  # the team's sweep clock, set by the controller
         self.entry_y: float | None = None  # where the ice edge was seen on the way in
         self.leg_y: float | None = None  # where the current straight leg began
         # Set while passes find no edge (nothing to measure): where the first of them
         # began, which each way out returns to.
         self.return_y: float | None = None
         self.exit_y: float | None = None  # where it was left on the way out
+        self.turn_depth: float | None = None  # set once an in-leg has measured: turn there
         self.turn_sign = 0  # +1 left (counter-clockwise), -1 right
         self.turn_radius = config.max_turn_radius_m
         self.sweeps = 0  # reversals so far
@@ -160,66 +259,135 @@ class Patrol:
         self.out_algae_top: float | None = None  # where the out leg first saw algae
         self.out_algae_x: float | None = None  # and at which x
         self.out_started_in_algae: bool | None = None
+        self.was_measuring = False  # whether the last tick went slowly to measure
+        self.out_slow = False  # whether the out leg came upon the algae slowly
 
     def spacing(self, lo: float, hi: float) -> float:
         c = self.config
         raw = (hi - lo) / c.passes_per_sweep
         return min(max(raw, 2 * c.min_turn_radius_m), 2 * c.max_turn_radius_m)
 
-    def _start_turn(self, lo: float, hi: float, heading_in: bool) -> None:
-        """Choose the direction along the edge, then the arc that moves one pass."""
+    def _plan(self, lo: float, hi: float, heading_in: bool) -> tuple[float, int, bool]:
+        """The next pass line, the direction along the edge to it, and whether it
+        begins a new sweep. Changes nothing."""
         c = self.config
         step = self.spacing(lo, hi)
         if not lo <= self.line_x <= hi:
             # The segment moved away from under the robot: head back at the widest pass.
-            self.direction = 1 if self.line_x < lo else -1
-            step = 2 * c.max_turn_radius_m
-        else:
-            nxt = self.line_x + self.direction * step
-            # the last pass stops a little inside the end: exactly on the edge's end a
-            # robot wobbling off the ice's side would see 'no ice' under the ice
-            end = hi - c.end_inset_m if self.direction > 0 else lo + c.end_inset_m
-            room = max(0.0, (end - self.line_x) * self.direction)
-            if (nxt > hi or nxt < lo) and room >= max(0.25 * step, 2 * c.min_turn_radius_m):
-                step = room  # a short last pass, so the sweep reaches the segment's end
-            elif nxt > hi or nxt < lo:
-                self.direction = -self.direction
-                # The first pass of each sweep is shortened by a fraction that walks the
-                # golden-ratio sequence, so successive sweeps sample new columns of the
-                # depth profile instead of repeating the same pass lines.
-                self.sweeps += 1
-                step *= self._first_pass_fraction(lo, hi, step, heading_in)
-                back = self.line_x + self.direction * step
-                if back > hi or back < lo:  # narrower than a pass: head for the middle
-                    self.direction = 1 if self.line_x < 0.5 * (lo + hi) else -1
-        self.line_x += self.direction * step
-        self.turn_radius = 0.5 * step
+            direction = 1 if self.line_x < lo else -1
+            return self.line_x + direction * 2 * c.max_turn_radius_m, direction, False
+        direction = self.direction
+        nxt = self.line_x + direction * step
+        if lo <= nxt <= hi:
+            return nxt, direction, False
+        # the last pass stops a little inside the end: exactly on the edge's end a
+        # robot wobbling off the ice's side would see 'no ice' under the ice
+        end = hi - c.end_inset_m if direction > 0 else lo + c.end_inset_m
+        room = max(0.0, (end - self.line_x) * direction)
+        if room >= max(0.25 * step, 2 * c.min_turn_radius_m):
+            return self.line_x + direction * room, direction, False  # a short last pass
+        direction = -direction
+        length = self._first_pass(lo, hi, step, heading_in, direction)
+        line = self.line_x + direction * length
+        if not lo <= line <= hi:  # narrower than a pass: head for the middle
+            direction = 1 if self.line_x < 0.5 * (lo + hi) else -1
+            line = self.line_x + direction * length
+        return line, direction, True
+
+    def _start_turn(self, lo: float, hi: float, heading_in: bool) -> None:
+        """Choose the next pass line, then the arc from where the robot is onto it."""
+        c = self.config
+        line, direction, new_sweep = self._plan(lo, hi, heading_in)
+        self.arc_from = (self.line_x, self.direction)
+        self.sweeps += new_sweep
+        self.direction = direction
+        self.line_x = line
+        self.turn_radius = min(c.max_turn_radius_m,
+                               max(0.5 * c.min_turn_radius_m, 0.5 * abs(line - self.x)))
         # Heading +y, going +x is a right (clockwise) turn; heading -y it is a left one.
-        self.turn_sign = -self.direction if heading_in else self.direction
+        self.turn_sign = -direction if heading_in else direction
         self.turned = 0.0
 
-    def _first_pass_fraction(self, lo: float, hi: float, step: float, heading_in: bool
-                             ) -> float:
-        """How much of a pass the first pass of a new sweep moves: of fractions in
-        [0.3, 1], the one whose in-legs (the sweep at the regular spacing) land on the
-        depth map's stalest bins, so that every column of the profile gets sampled
-        again within a sweep or two. Only in-legs count: an out-leg that starts inside
-        algae deeper than the last turn cannot measure it. Candidates start at the
-        golden-ratio walk, which breaks ties and keeps successive sweeps on new columns."""
-        golden = (self.sweeps * 0.6180339887) % 1.0
+    def _first_pass(self, lo: float, hi: float, step: float, heading_in: bool,
+                    direction: int) -> float:
+        """The length of the first pass of a new sweep: onto the team's grid, unless a
+        bin of the profile that matters has not been measured, when its line is
+        chosen to reach the stalest bins instead."""
+        if self.clock is not None and not self.depth_map.gap(lo, hi):
+            on_grid = self._grid_first_pass(lo, hi, step, heading_in, direction)
+            if on_grid is not None:
+                return on_grid
+        return step * self._first_pass_fraction(lo, hi, step, heading_in, direction)
+
+    def _in_leg_staleness(self, line: float, lo: float, hi: float, step: float,
+                          heading_in: bool, direction: int) -> int:
+        """How stale the bins are that a sweep's in-legs sample, from ``line`` on at the
+        regular spacing. Only in-legs count: an out-leg that starts inside algae deeper
+        than the last turn cannot measure it."""
+        score = 0
+        inward = not heading_in  # the leg after this turn goes in, or out
+        while lo <= line <= hi:
+            score += self.depth_map.staleness(line) if inward else 0
+            line += direction * step
+            inward = not inward
+        return score
+
+    def _grid_first_pass(self, lo: float, hi: float, step: float, heading_in: bool,
+                         direction: int) -> float | None:
+        """The first pass onto the team's grid: the sweep's lines at (g + j) passes from
+        the end it starts at, so every robot's phase takes the same levels (eq. 3.1
+        scales each segment to pi). g walks the golden ratio from sweep to sweep of the
+        same direction, and is the same for every robot, as it comes from the team's
+        sweep count; each robot chooses which of its lines are in-legs (the pass
+        length, up to two passes) by the staleness of the bins they sample."""
+        assert self.clock is not None
+        c = self.config
+        g = ((round(self.clock) // 2) * GOLDEN) % 1.0
+        end = lo if direction > 0 else hi
+        shortest = max(FIRST_PASS_MIN * step, 2 * c.min_turn_radius_m)
+        best, best_score = None, -1
+        for m in range(4):
+            line = end + direction * (g + m) * step
+            length = (line - self.line_x) * direction
+            if length < shortest:
+                continue
+            if length > (FIRST_PASS_MIN + FIRST_PASS_SPAN) * step:
+                break
+            score = self._in_leg_staleness(line, lo, hi, step, heading_in, direction)
+            if score > best_score:
+                best, best_score = length, score
+        return best
+
+    def _first_pass_fraction(self, lo: float, hi: float, step: float, heading_in: bool,
+                             direction: int) -> float:
+        """How much of a pass the first pass of a new sweep moves, off the grid: of
+        fractions in [0.3, 2], the one whose in-legs (the sweep at the regular spacing)
+        land on the depth map's stalest bins, so that every column of the profile gets
+        sampled again within a sweep or two. Candidates start at the golden-ratio walk,
+        which breaks ties and keeps successive sweeps on new columns."""
+        golden = ((self.sweeps + 1) * GOLDEN) % 1.0
         best, best_score = FIRST_PASS_MIN + FIRST_PASS_SPAN * golden, -1
         for j in range(FIRST_PASS_CANDIDATES):
             frac = FIRST_PASS_MIN + FIRST_PASS_SPAN * ((golden + j / FIRST_PASS_CANDIDATES) % 1)
-            score = 0
-            line = self.line_x + self.direction * frac * step
-            inward = not heading_in  # the leg after this turn goes in, or out
-            while lo <= line <= hi:
-                score += self.depth_map.staleness(line) if inward else 0
-                line += self.direction * step
-                inward = not inward
+            line = self.line_x + direction * frac * step
+            score = self._in_leg_staleness(line, lo, hi, step, heading_in, direction)
             if score > best_score:
                 best, best_score = frac, score
         return best
+
+    def _turn_depth(self, lo: float, hi: float, depth: float) -> float:
+        """How deep an in-leg that has measured its column goes on before it turns:
+        ``turn_margin_m`` past the algae its map expects under the next pass line (the
+        deepest it knows in the segment if that column is new), so the out-leg there
+        starts below the algae and measures it too."""
+        c = self.config
+        dm = self.depth_map
+        line, _, _ = self._plan(lo, hi, heading_in=True)
+        expected = dm.depths.get(dm.bin_of(line))
+        if expected is None:
+            inside = [d for b, d in dm.depths.items() if dm.bin_of(lo) <= b <= dm.bin_of(hi)]
+            expected = max(inside, default=depth)
+        return min(c.max_depth_m, max(depth, expected + c.turn_margin_m))
 
     def _hold_line(self, x: float, theta: float, heading: float) -> float:
         c = self.config
@@ -233,12 +401,15 @@ class Patrol:
     def _measure_on_the_way_out(self, x: float, y: float, prev_y: float | None,
                                 ice: bool, algae: bool) -> None:
         """The out leg samples the depth profile too, on its own pass line: coming out
-        from the turn depth, algae first seen marks the extent there; algae from the
-        start only bounds it from below, and then nothing is recorded."""
+        from the turn depth, algae first seen marks the extent there (from the ice edge
+        the in-legs found); algae from the start only bounds it from below, and then
+        nothing is recorded. A ROUGH sample if it came upon the algae at full speed
+        (the map had no depth for the column), else a PRECISE one."""
         mid = y if prev_y is None else 0.5 * (prev_y + y)
         if self.out_started_in_algae is None:
             self.out_started_in_algae = algae
         if algae and self.out_algae_top is None:
+            self.out_slow = self.was_measuring
             self.out_algae_top = mid
             self.out_algae_x = x
         if not ice and self.exit_y is None:
@@ -246,24 +417,33 @@ class Patrol:
             if not self.out_started_in_algae:
                 c = self.config
                 top = self.out_algae_top
-                depth = c.min_depth_m if top is None else max(c.min_depth_m, top - mid)
+                at = x if self.out_algae_x is None else self.out_algae_x
+                edge = self.depth_map.edge_y(at)
+                depth = c.min_depth_m if top is None else max(
+                    c.min_depth_m, top - (mid if edge is None else edge))
                 # where the algae was seen, if it was: the leg may have drifted since
-                self.depth_map.record(x if self.out_algae_x is None else self.out_algae_x,
-                                      depth)
+                self.depth_map.record(at, depth, PRECISE if self.out_slow else ROUGH)
 
     def _measured_depth(self, depth: float, prev_y: float | None, y: float) -> float:
         """The patrol depth of this pass: the minimum if algae ended before it, else
-        the middle of the last tick with algae and this first tick without."""
+        the middle of the last tick with algae and this first tick without, from the
+        ice edge the in-legs found."""
         c = self.config
         if depth >= c.max_depth_m:
             return depth
         if self.algae_depth is None or self.algae_depth < c.min_depth_m or prev_y is None:
             return c.min_depth_m
-        return max(c.min_depth_m, 0.5 * (self.algae_depth + depth))
+        measured = 0.5 * (self.algae_depth + depth)
+        assert self.entry_y is not None
+        edge = self.depth_map.edge_y(self.x)
+        if edge is not None:
+            measured += self.entry_y - edge
+        return max(c.min_depth_m, measured)
 
     def step(self, x: float, y: float, theta: float, ice: bool, algae: bool,
              lo: float, hi: float) -> Steer:
         c = self.config
+        self.x = x
         rotation = 0.0 if self.prev_theta is None else wrap_pi(theta - self.prev_theta)
         self.prev_theta = theta
         prev_y, self.prev_y = self.prev_y, y
@@ -273,6 +453,7 @@ class Patrol:
             if ice:
                 # The edge lies between this tick and the last one: take the middle.
                 self.entry_y = y if prev_y is None else 0.5 * (prev_y + y)
+                self.depth_map.cross(x, self.entry_y)
                 self.algae_depth = None
                 self.return_y = None
                 self.motion = Motion.UNDER
@@ -285,11 +466,16 @@ class Patrol:
                 self.motion = Motion.TURN_UNDER
         if self.motion is Motion.UNDER:
             depth = y - (self.entry_y if self.entry_y is not None else y)
-            if algae:
-                self.algae_depth = depth
-            if (depth >= c.min_depth_m and not algae) or depth >= c.max_depth_m:
-                self.last_depth = self._measured_depth(depth, prev_y, y)
-                self.depth_map.record(x, self.last_depth)  # where it was measured
+            if self.turn_depth is None:
+                if algae:
+                    self.algae_depth = depth
+                if (depth >= c.min_depth_m and not algae) or depth >= c.max_depth_m:
+                    self.last_depth = self._measured_depth(depth, prev_y, y)
+                    self.depth_map.record(x, self.last_depth)  # where it was measured
+                    self.turn_depth = self._turn_depth(lo, hi, depth)
+            if self.turn_depth is not None and (depth >= self.turn_depth
+                                                or depth >= c.max_depth_m):
+                self.turn_depth = None
                 self._start_turn(lo, hi, heading_in=True)
                 self.motion = Motion.TURN_UNDER
         elif self.motion is Motion.EXIT:
@@ -306,7 +492,10 @@ class Patrol:
                 self.motion = Motion.TURN_OUT
         if self.motion in (Motion.TURN_UNDER, Motion.TURN_OUT):
             self.turned += self.turn_sign * rotation
-            if self.turned >= math.pi - 0.03:
+            # The arc ends on the leg's heading (+-y), whatever heading it began with.
+            heading = -HALF_PI if self.motion is Motion.TURN_UNDER else HALF_PI
+            if ((self.turned >= HALF_PI and self.turn_sign * wrap_pi(heading - theta) <= 0.03)
+                    or self.turned >= math.pi + 0.5):
                 self.leg_y = None  # a straight leg begins
                 if self.motion is Motion.TURN_UNDER:
                     self.motion = Motion.EXIT
@@ -320,12 +509,28 @@ class Patrol:
             else:
                 return Steer(self.turn_sign / self.turn_radius, self.motion)
         heading = HALF_PI if self.motion in (Motion.ENTER, Motion.UNDER) else -HALF_PI
-        return Steer(self._hold_line(x, theta, heading), self.motion, self._measuring(x, y))
+        self.was_measuring = self._measuring(x, y)
+        return Steer(self._hold_line(x, theta, heading), self.motion, self.was_measuring)
 
     def _measuring(self, x: float, y: float) -> bool:
-        """Whether this in-leg is near where the depth map expects the algae to end
-        here, or anywhere under the ice if the map has no depth for this column yet."""
-        if self.motion is not Motion.UNDER or self.entry_y is None:
+        """Whether this leg is about to cross an edge it measures, so goes slowly: on
+        the way in, the ice edge where the in-legs found it (from ``edge_zone_m`` before
+        it); under the ice, near where the depth map expects the algae to end, or
+        anywhere if the map has no depth for this column yet; on the way out, the
+        algae's end where the map expects it (from ``edge_zone_m`` before it), if the
+        leg began below it."""
+        c = self.config
+        if self.motion is Motion.ENTER:
+            edge = self.depth_map.edge_y(x)
+            return edge is not None and -c.edge_zone_m < y - edge < 0.1
+        if self.motion is Motion.EXIT:
+            if self.out_started_in_algae is not False or self.out_algae_top is not None:
+                return False
+            edge = self.depth_map.edge_y(x)
+            expected = self.depth_map.depths.get(self.depth_map.bin_of(x))
+            return (edge is not None and expected is not None
+                    and -0.1 < y - edge - expected < c.edge_zone_m)
+        if self.motion is not Motion.UNDER or self.entry_y is None or self.turn_depth is not None:
             return False
         expected = self.depth_map.depths.get(self.depth_map.bin_of(x))
-        return expected is None or abs(y - self.entry_y - expected) < self.config.measure_zone_m
+        return expected is None or abs(y - self.entry_y - expected) < c.measure_zone_m

@@ -1,6 +1,6 @@
 """Phase along the patrol cycle: eq. 3.1 (corrected), wrapping, the desired-phase
 update with feedback linearisation and chain consensus (eq. 4.5-4.8) and the speed
-law (eq. 4.10)."""
+along the patrol (eq. 4.10 made to step one pass at a time)."""
 
 from __future__ import annotations
 
@@ -91,29 +91,28 @@ def desired_phase_step(
     return wrap_2pi(natural + control)
 
 
-def speed_law(phase_des: float, phase: float, k_v: float, v_max: float) -> float:
-    """Forward speed tracking the desired phase, thesis eq. 4.10, within [0, v_max]:
-    a robot ahead of its desired phase waits rather than backing up its patrol."""
-    return min(max(k_v * wrap_pi(phase_des - phase), 0.0), v_max)
+def pass_speed(phase_des: float, phase: float, level_from: float, level_to: float,
+               on_leg: bool, measuring: bool, arc_begun: bool, v_max: float,
+               v_measure: float, max_ahead: float = 0.5) -> float:
+    """Forward speed along the patrol: the desired phase tracked one pass at a time.
 
-
-def patrol_speed(phase_des: float, phase: float, on_leg: bool, measuring: bool, k_v: float,
-                 v_max: float, v_measure: float) -> float:
-    """Forward speed along the patrol. In the arcs, eq. 4.10 tracks the desired phase.
-    On a straight leg across the edge the position phase of eq. 3.1 does not move, so
-    eq. 4.10 has nothing to track there: its speed would grow only with the lag the leg
-    itself builds up, and a robot would crawl out of every turn and hand its neighbours
-    that lag as phase error. A robot behind its desired phase runs its legs at full
-    speed instead and leaves the tracking to the arcs, except while ``measuring`` (near
-    where the leg expects the algae to end): there it goes no faster than eq. 4.10 or
-    ``v_measure``, whichever is faster, as one 10 Hz tick at full speed is 5 cm of
-    depth. A robot ahead of its desired phase waits, as in eq. 4.10."""
-    law = speed_law(phase_des, phase, k_v, v_max)
-    if not on_leg or wrap_pi(phase_des - phase) <= 0.0:
-        return law
-    if measuring:
-        return min(v_max, max(law, v_measure))
-    return v_max
+    The position phase of eq. 3.1 stands still on a straight leg and steps from one
+    pass line's phase (``level_from``) to the next (``level_to``) in the arc between
+    them. Tracking the desired phase continuously with eq. 4.10 then leaves every
+    robot a sawtooth behind it, of a size set by its legs, so neighbours with deep and
+    shallow legs differ by it. Instead, a robot runs its legs at ``v_max`` (at
+    ``v_measure`` while ``measuring``, one 10 Hz tick being 5 cm at full speed) and
+    waits at the end of each leg until the desired phase reaches the middle of the
+    arc's step; then it drives the arc at ``v_max``. Every robot's phase is then the
+    same staircase, stepping when the team's desired phase crosses the middle of each
+    step, whatever its legs. A robot more than ``max_ahead`` ahead of its desired
+    phase (one that started ahead) waits on its leg too."""
+    if on_leg:
+        if wrap_pi(phase_des - phase) < -max_ahead:
+            return 0.0
+        return min(v_max, v_measure) if measuring else v_max
+    middle = level_from + 0.5 * wrap_pi(level_to - level_from)
+    return v_max if arc_begun or wrap_pi(phase_des - middle) >= 0.0 else 0.0
 
 
 def limit_lead(phase_des: float, phase: float, max_lead: float) -> float:

@@ -48,7 +48,6 @@ def build_parser() -> argparse.ArgumentParser:
                    help="[gains], [patrol] and [limits] tables (see README)")
     p.add_argument("--k-s", type=float, help="workload gain K_s (eq. 4.3)")
     p.add_argument("--k-phi", type=float, help="phase consensus gain K_phi (eq. 4.7)")
-    p.add_argument("--k-v", type=float, help="speed gain K_v, m/s per rad (eq. 4.10)")
     p.add_argument("--cycle-s", type=float, help="common cycle period, s")
     p.add_argument("--passes", type=int, help="passes per sweep of the segment")
     p.add_argument("--max-depth", type=float, default=2.0,
@@ -198,7 +197,10 @@ class AgentNode:
     def _neighbour_view(self, rid: int | None, k: int) -> Neighbour | None:
         """The neighbour's state of tick k-1 (or the latest before k if that is missing)."""
         s = self._latest_state(rid, k - 1)
-        return None if s is None else Neighbour(s.robot, s.lo, s.hi, s.phase_des, s.workload)
+        if s is None:
+            return None
+        return Neighbour(s.robot, s.lo, s.hi, s.phase_des, s.workload, s.turns,
+                         tuple(zip(s.end_bins, s.end_depths, strict=True)))
 
     def _first_segment(self, k: int, edge_lo: float, edge_hi: float) -> tuple[float, float]:
         """Equal initial segments when the team starts together (tick 0, or no
@@ -354,6 +356,8 @@ class AgentNode:
             direction=out.direction, lower=-1 if lower_id is None else lower_id,
             upper=-1 if upper_id is None else upper_id,
             edge_lo=sense.edge_lo, edge_hi=sense.edge_hi, dropped=self.dropped,
+            turns=out.turns, end_bins=[b for b, _ in out.end_depths],
+            end_depths=[d for _, d in out.end_depths],
         )
         # The state before the command: the world cannot step (and start tick k+1) until
         # every command is in, so each neighbour's state of tick k is always out before
@@ -372,7 +376,7 @@ class AgentNode:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     overrides = {
-        "gains": {"k_s": args.k_s, "k_phi": args.k_phi, "k_v": args.k_v, "cycle_s": args.cycle_s},
+        "gains": {"k_s": args.k_s, "k_phi": args.k_phi, "cycle_s": args.cycle_s},
         "patrol": {"passes_per_sweep": args.passes},
     }
     try:

@@ -75,7 +75,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--config", metavar="FILE.toml", help="agent configuration for every agent")
     p.add_argument("--k-s", type=float, help="workload gain K_s per tick (eq. 4.3)")
     p.add_argument("--k-phi", type=float, help="phase consensus gain K_phi (eq. 4.7)")
-    p.add_argument("--k-v", type=float, help="speed gain K_v, m/s per rad (eq. 4.10)")
     p.add_argument("--cycle-s", type=float, help="common patrol cycle period, s")
     p.add_argument("--passes", type=int, help="passes per sweep of a segment")
     p.add_argument("--ns", help="run namespace (default: a fresh one per run)")
@@ -100,7 +99,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _agent_args(args: argparse.Namespace) -> list[str]:
     out: list[str] = []
-    for flag in ("config", "k_s", "k_phi", "k_v", "cycle_s", "passes"):
+    for flag in ("config", "k_s", "k_phi", "cycle_s", "passes"):
         value = getattr(args, flag)
         if value is not None:
             out += ["--" + flag.replace("_", "-"), str(value)]

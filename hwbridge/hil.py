@@ -35,7 +35,7 @@ NEIGHBOUR_TIMEOUT_S = 0.3
 
 def _agent_args(args: argparse.Namespace) -> list[str]:
     out: list[str] = []
-    for flag in ("config", "k_s", "k_phi", "k_v", "cycle_s", "passes"):
+    for flag in ("config", "k_s", "k_phi", "cycle_s", "passes"):
         value = getattr(args, flag, None)
         if value is not None:
             out += ["--" + flag.replace("_", "-"), str(value)]

@@ -9,8 +9,8 @@ import statistics
 
 import pytest
 
-from agent.controller import Controller, initial_segment
-from agent.patrol import DepthMap, Motion, Patrol, PatrolConfig
+from agent.controller import Controller, Neighbour, initial_segment
+from agent.patrol import ROUGH, DepthMap, Motion, Patrol, PatrolConfig
 from agent.phase import position_to_phase, wrap_pi
 from simworld.maps import load_map
 from simworld.world import World
@@ -42,7 +42,7 @@ def drive(patrol: Patrol, track: list[tuple[float, float, bool, bool]], lo=0.0, 
     return out
 
 
-def test_patrol_asks_for_slow_legs_only_near_the_expected_algae_end():
+def test_patrol_asks_for_slow_legs_only_near_the_edges_it_measures():
     cfg = PatrolConfig()
     dm = DepthMap(0.0, 0.1, cfg.min_depth_m)
     patrol = Patrol(cfg, dm, x=0.55)
@@ -55,12 +55,17 @@ def test_patrol_asks_for_slow_legs_only_near_the_expected_algae_end():
             out.append(patrol.step(0.55, y, up, True, True, 0.0, 2.0).measuring)
         return out
 
-    # nothing measured in this column yet: slow all the way under the ice
+    # no ice edge known yet: fast on the way in; nothing measured in this column
+    # yet: slow all the way under the ice
     assert measuring_along([0.05, 0.5, 1.0]) == [False, True, True, True]
+    assert dm.edge_y(0.55) == pytest.approx(0.0)  # that leg found the edge at 0
     dm.record(0.55, 0.9)
-    # edge at 0: fast until 8 cm before the 0.9 m the map expects, slow to 8 cm past it
+    # slow from 8 cm before the known ice edge; under the ice fast until 8 cm before
+    # the 0.9 m the map expects, slow to 8 cm past it
     assert measuring_along([0.05, 0.5, 0.83, 0.9, 0.97, 1.2]) == [
-        False, False, False, True, True, True, False]
+        True, False, False, True, True, True, False]
+    assert measuring_along([]) == [True] and patrol.step(
+        0.55, -0.1, up, False, False, 0.0, 2.0).measuring is False  # 10 cm out: fast
     with pytest.raises(ValueError):
         PatrolConfig(measure_speed=0.0)
 
@@ -72,14 +77,19 @@ def test_patrol_measures_depth_at_the_middle_of_the_algae_transition():
     # approach: ice appears between y = -0.02 and 0.02 (edge at 0), algae to 0.9 m
     track = [(-0.1, math.pi / 2, False, False), (-0.02, math.pi / 2, False, False)]
     y = 0.02
-    while y < 0.93:
+    while y < 1.0:
         track.append((y, math.pi / 2, True, y < 0.9))
         y += 0.04
     motions = drive(patrol, track)
     assert motions[1] is Motion.ENTER and Motion.UNDER in motions
-    assert motions[-1] is Motion.TURN_UNDER
     assert patrol.last_depth == pytest.approx(0.9, abs=0.021)
     assert dm.depths[5] == pytest.approx(0.9, abs=0.021)
+    # it goes on to turn_margin_m past the deepest algae it knows (the next pass line's
+    # column is new), so the out-leg there starts below the algae and measures it
+    turned = [y for (y, *_), mo in zip(track, motions, strict=True) if mo is Motion.TURN_UNDER]
+    assert turned and turned[0] >= 0.9 + cfg.turn_margin_m - 0.02
+    assert all(mo is Motion.UNDER for (y, *_), mo in zip(track, motions, strict=True)
+               if 0.02 <= y < 0.93)
 
 
 def test_patrol_without_algae_records_exactly_the_minimum_depth():
@@ -226,3 +236,104 @@ def test_random_profile_every_column_of_each_segment_gets_measured():
         wrong = [(b, depth[b], dm.depths[b]) for b in whole
                  if b in dm.depths and abs(dm.depths[b] - depth[b]) > 0.05]
         assert not missing and len(wrong) <= 1, (c.robot, missing, wrong)
+
+
+def test_depth_map_keeps_samples_of_the_best_kind_a_bin_has():
+    dm = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3)
+    dm.record(0.101, 0.4)  # on the side of bin 1 (within SIDE_M): maybe bin 0's column
+    assert dm.depths[1] == 0.4 and not dm.known(1)
+    assert dm.staleness(0.15) > 10  # counts as never sampled: a pass there is wanted
+    dm.record(0.15, 1.26, ROUGH)  # an out-leg at full speed, mid-bin
+    assert dm.depths[1] == 1.26 and dm.known(1)
+    dm.record(0.102, 0.4)  # a side sample no longer counts
+    assert dm.depths[1] == 1.26
+    dm.record(0.15, 1.21)  # a slow, precise one replaces the rough ones
+    dm.record(0.15, 1.25, ROUGH)
+    assert dm.depths[1] == 1.21
+    for d in (1.2, 1.22, 1.9):  # the mean of the last three but the outermost two
+        dm.record(0.14, d)
+    assert dm.depths[1] == pytest.approx(1.22)
+
+
+def test_depth_map_takes_the_ice_edge_from_many_crossings_nearby():
+    dm = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3)
+    assert dm.edge_y(0.55) is None
+    for i, err in enumerate((0.02, -0.024, 0.011, -0.007)):
+        dm.cross(0.35 + 0.1 * i, 3.0 + err)  # bins 3 to 6
+    assert dm.edge_y(0.55) == pytest.approx(3.0, abs=0.001)  # bins 3-7 pooled
+    assert dm.edge_y(0.15) == pytest.approx(3.02)  # only bin 3 within two bins
+    assert dm.edge_y(1.5) is None
+
+
+def test_neighbours_depths_fill_the_bins_a_robot_has_not_measured():
+    lower = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3)
+    for s, d in ((1.65, 0.5), (1.75, 1.2), (1.95, 0.8), (1.05, 1.5)):
+        lower.record(s, d)
+    lower.record(1.801, 0.9)  # a side sample: not told to the neighbours
+    ends = lower.near_ends(0.0, 2.0, 0.3)
+    assert ends == ((17, 1.2), (19, 0.8))  # its measured bins within 0.3 m of 2.0
+    upper = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3)
+    upper.record(2.25, 0.3)
+    # [1.9, 2.5]: bin 19 from the neighbour, not from the nearest own bin (0.3)
+    assert upper.average(1.9, 2.5) == pytest.approx((0.1 * 0.3 + 0.5 * 0.3) / 0.6)
+    upper.learn(ends)
+    assert upper.average(1.9, 2.5) == pytest.approx((0.1 * 0.8 + 0.5 * 0.3) / 0.6)
+    upper.record(1.95, 0.85)  # its own measurement wins
+    assert upper.average(1.9, 2.0) == pytest.approx(0.85)
+
+
+def test_a_gap_in_the_profile_matters_only_between_different_depths():
+    dm = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3)
+    for b in range(10):
+        if b not in (3, 7):
+            dm.record(0.1 * b + 0.05, 0.3 if b < 5 else 1.2)
+    # bin 3 lies between two 0.3 m bins, bin 7 between two 1.2 m ones: no gap
+    assert not dm.gap(0.0, 1.0)
+    dm.record(0.501, 1.2)  # bin 5 has a side sample only (it may be bin 4's column)
+    del dm.depths[5], dm.kind[5]
+    dm.record(0.501, 1.2)
+    assert not dm.known(5)
+    assert dm.gap(0.0, 1.0)  # bin 5 lies between 0.3 (bin 4) and 1.2 (bin 6)
+    assert not dm.gap(0.0, 0.5)  # outside [0, 0.5]
+    dm.learn(((5, 1.2),))
+    assert not dm.gap(0.0, 1.0)  # a neighbour's measurement counts
+
+
+def test_every_robot_puts_its_pass_lines_on_the_same_grid_of_phases():
+    """Robots with different segments starting a sweep at the same count of the team's
+    sweep clock choose first passes whose lines take the same phases (eq. 3.1)."""
+    levels = []
+    for lo, hi in ((0.0, 1.2), (1.2, 2.4), (2.4, 6.0)):
+        cfg = PatrolConfig()
+        dm = DepthMap(0.0, 0.1, cfg.min_depth_m)
+        patrol = Patrol(cfg, dm, x=hi - cfg.end_inset_m)
+        patrol.clock = 7.03  # the sweep that begins at hi, going down
+        patrol._start_turn(lo, hi, heading_in=True)
+        assert patrol.direction == -1 and patrol.sweeps == 1
+        line, step = patrol.line_x, patrol.spacing(lo, hi)
+        phases = [position_to_phase(line - j * step, lo, hi, -1) for j in range(5)]
+        levels.append([(p - math.pi) / (math.pi / cfg.passes_per_sweep) % 1.0 for p in phases])
+    for a, b in itertools.combinations(levels, 2):
+        assert a == pytest.approx(b, abs=1e-9)
+    # the next sweep the same way (two counts on) puts the grid elsewhere
+    cfg = PatrolConfig()
+    patrol = Patrol(cfg, DepthMap(0.0, 0.1, cfg.min_depth_m), x=6.0 - cfg.end_inset_m)
+    patrol.clock = 9.0
+    patrol._start_turn(2.4, 6.0, heading_in=True)
+    offset = (6.0 - patrol.line_x) / patrol.spacing(2.4, 6.0) % 1.0
+    assert offset != pytest.approx(levels[2][0], abs=0.05)
+
+
+def test_a_robot_counts_sweeps_with_its_lower_neighbour():
+    """The sweep clock of robot 1 is robot 0's, corrected by their phase difference,
+    whatever robot 1 counted before (a robot restarted in a running team)."""
+    ctrl = Controller(1, 2.0, 4.0, 0.0, 6.0, x=2.0)
+    ctrl.step(0.1, 2.0, -0.3, math.pi / 2, False, False, None, None, False, False)
+    own = ctrl.turns
+    assert 0.0 <= own < 2 * math.pi
+    lower = Neighbour(0, 0.0, 2.0, phase_des=ctrl.phase_des - 0.05, workload=0.6,
+                      turns=40 * math.pi + ctrl.phase_des - 0.05)
+    out = ctrl.step(0.1, 2.0, -0.3, math.pi / 2, False, False, lower, None, True, False)
+    assert out.turns == pytest.approx(lower.turns + wrap_pi(out.phase_des - lower.phase_des))
+    assert ctrl.patrol.clock == pytest.approx(out.turns / math.pi)
+    assert round(ctrl.patrol.clock) == 40

@@ -1,6 +1,6 @@
-"""Phase wrap, eq. 3.1 both ways, and the desired-phase update (eq. 4.5-4.8, 4.10)."""
+"""Phase wrap, eq. 3.1 both ways, the desired-phase update (eq. 4.5-4.8) and the speed
+along the patrol."""
 
-import itertools
 import math
 
 import pytest
@@ -12,10 +12,9 @@ from agent.phase import (
     consensus_term,
     desired_phase_step,
     limit_lead,
-    patrol_speed,
+    pass_speed,
     phase_to_position,
     position_to_phase,
-    speed_law,
     wrap_2pi,
     wrap_pi,
 )
@@ -92,28 +91,34 @@ def test_consensus_pulls_towards_neighbours_and_ends_are_one_sided():
     assert consensus_term(0.05, None, 2 * math.pi - 0.05, 0.5) == pytest.approx(-0.05)
 
 
-def test_speed_law_eq_4_10_within_limits():
-    assert speed_law(1.1, 1.0, 2.0, 0.5) == pytest.approx(0.2)
-    assert speed_law(2.0, 1.0, 2.0, 0.5) == 0.5
-    assert speed_law(0.9, 1.0, 2.0, 0.5) == 0.0  # ahead: wait, never reverse the patrol
-    assert speed_law(0.05, 2 * math.pi - 0.05, 2.0, 0.5) == pytest.approx(0.2)
+def test_pass_speed_runs_legs_and_steps_each_arc_at_the_middle_of_its_step():
+    v_max, slow = 0.5, 0.1
+    step = (1.0, 1.2)  # the arc takes the phase from 1.0 to 1.2: its middle is 1.1
+    # on a leg: full speed whether behind or a little ahead, slowly where it measures
+    for phase_des in (0.95, 1.0, 1.3):
+        assert pass_speed(phase_des, 1.0, *step, True, False, False, v_max, slow) == v_max
+        assert pass_speed(phase_des, 1.0, *step, True, True, False, v_max, slow) == slow
+    # far ahead of the desired phase (more than max_ahead): wait on the leg
+    assert pass_speed(0.4, 1.0, *step, True, False, False, v_max, slow) == 0.0
+    # at an arc: wait until the desired phase reaches the middle of the step...
+    assert pass_speed(1.09, 1.0, *step, False, False, False, v_max, slow) == 0.0
+    assert pass_speed(1.1, 1.0, *step, False, False, False, v_max, slow) == v_max
+    assert pass_speed(1.5, 1.0, *step, False, False, False, v_max, slow) == v_max
+    # ...and once begun, drive it through
+    assert pass_speed(1.0, 1.05, *step, False, False, True, v_max, slow) == v_max
+    # across the 2 pi seam (a step from 6.2 to 0.1, middle 6.2 + 0.0916)
+    seam = (6.2, 0.1)
+    assert pass_speed(6.25, 6.2, *seam, False, False, False, v_max, slow) == 0.0
+    assert pass_speed(0.01, 6.2, *seam, False, False, False, v_max, slow) == v_max
+    assert pass_speed(6.0, 0.05, *seam, True, False, False, v_max, slow) == v_max
 
 
-def test_patrol_speed_runs_legs_and_tracks_in_arcs():
-    k_v, v_max, slow = 5.0, 0.5, 0.1
-    # in an arc: eq. 4.10
-    assert patrol_speed(1.01, 1.0, False, False, k_v, v_max, slow) == pytest.approx(0.05)
-    # on a leg, behind even a little: full speed, as the phase cannot move there
-    assert patrol_speed(1.01, 1.0, True, False, k_v, v_max, slow) == v_max
-    # measuring the algae's end: at least v_measure, more if eq. 4.10 asks for it
-    assert patrol_speed(1.01, 1.0, True, True, k_v, v_max, slow) == pytest.approx(slow)
-    assert patrol_speed(1.05, 1.0, True, True, k_v, v_max, slow) == pytest.approx(0.25)
-    assert patrol_speed(2.0, 1.0, True, True, k_v, v_max, slow) == v_max
-    # ahead of the desired phase: wait, on a leg as in an arc, across the 2 pi seam too
-    for on_leg, measuring in itertools.product((False, True), repeat=2):
-        assert patrol_speed(0.9, 1.0, on_leg, measuring, k_v, v_max, slow) == 0.0
-        assert patrol_speed(2 * math.pi - 0.05, 0.05, on_leg, measuring, k_v, v_max,
-                            slow) == 0.0
+@given(st.floats(0.0, 2 * math.pi - 1e-9), st.floats(0.01, 0.5), st.floats(-3.0, 3.0))
+def test_pass_speed_is_zero_or_a_speed_of_the_robot(level, step, lead):
+    v = pass_speed(wrap_2pi(level + lead), level, level, wrap_2pi(level + step), False,
+                   False, False, 0.5, 0.1)
+    assert v in (0.0, 0.5)
+    assert (v == 0.5) == (wrap_pi(lead - 0.5 * step) >= 0.0)
 
 
 def test_limit_lead():
