@@ -22,6 +22,7 @@ from agent.phase import (
 )
 
 SHARED_REACH_M = 0.3  # a robot tells its neighbours its depths this close to its ends
+HURRY_RAD = 0.4  # a robot this far behind its desired phase measures nothing slowly
 
 
 @dataclass(frozen=True)
@@ -164,6 +165,9 @@ class Controller:
                 self.depth_map.learn(nb.depths)
         self._update_boundaries(lower, upper, has_lower, has_upper)
         before = self.phase_des
+        if before is not None and self.published is not None:
+            lag = wrap_pi(before - position_to_phase(x, self.lo, self.hi, self.patrol.direction))
+            self.patrol.hurry = lag > HURRY_RAD
         steer = self.patrol.step(x, y, theta, ice, algae, self.lo, self.hi)
         direction = self.patrol.direction
         phase = position_to_phase(x, self.lo, self.hi, direction)

@@ -260,6 +260,11 @@ class Patrol:
         self.out_algae_x: float | None = None  # and at which x
         self.out_started_in_algae: bool | None = None
         self.was_measuring = False  # whether the last tick went slowly to measure
+        # Set by the controller while the robot is well behind the team: it then
+        # measures nothing slowly (its samples are ROUGH, its crossings not kept).
+        self.hurry = False
+        self.from_water = False  # this way in has seen water: it will cross the edge
+        self.measures = True  # this in-leg crossed the edge, so can measure the depth
         self.out_slow = False  # whether the out leg came upon the algae slowly
 
     def spacing(self, lo: float, hi: float) -> float:
@@ -449,11 +454,18 @@ class Patrol:
         prev_y, self.prev_y = self.prev_y, y
         if self.motion in (Motion.ENTER, Motion.EXIT) and self.leg_y is None:
             self.leg_y = y
+            self.from_water = False
+        if self.motion is Motion.ENTER and not ice:
+            self.from_water = True
         if self.motion is Motion.ENTER:
             if ice:
                 # The edge lies between this tick and the last one: take the middle.
                 self.entry_y = y if prev_y is None else 0.5 * (prev_y + y)
-                self.depth_map.cross(x, self.entry_y)
+                # A leg that began under the ice (an agent started where its robot
+                # stood) crossed no edge: it measures nothing.
+                self.measures = self.from_water
+                if self.measures and (self.was_measuring or self.depth_map.edge_y(x) is None):
+                    self.depth_map.cross(x, self.entry_y)
                 self.algae_depth = None
                 self.return_y = None
                 self.motion = Motion.UNDER
@@ -471,7 +483,9 @@ class Patrol:
                     self.algae_depth = depth
                 if (depth >= c.min_depth_m and not algae) or depth >= c.max_depth_m:
                     self.last_depth = self._measured_depth(depth, prev_y, y)
-                    self.depth_map.record(x, self.last_depth)  # where it was measured
+                    if self.measures:
+                        self.depth_map.record(  # where it was measured
+                            x, self.last_depth, PRECISE if self.was_measuring else ROUGH)
                     self.turn_depth = self._turn_depth(lo, hi, depth)
             if self.turn_depth is not None and (depth >= self.turn_depth
                                                 or depth >= c.max_depth_m):
@@ -518,8 +532,10 @@ class Patrol:
         it); under the ice, near where the depth map expects the algae to end, or
         anywhere if the map has no depth for this column yet; on the way out, the
         algae's end where the map expects it (from ``edge_zone_m`` before it), if the
-        leg began below it."""
+        leg began below it. Never while the robot hurries to catch up with the team."""
         c = self.config
+        if self.hurry:
+            return False
         if self.motion is Motion.ENTER:
             edge = self.depth_map.edge_y(x)
             return edge is not None and -c.edge_zone_m < y - edge < 0.1

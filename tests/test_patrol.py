@@ -10,7 +10,7 @@ import statistics
 import pytest
 
 from agent.controller import Controller, Neighbour, initial_segment
-from agent.patrol import ROUGH, DepthMap, Motion, Patrol, PatrolConfig
+from agent.patrol import PRECISE, ROUGH, DepthMap, Motion, Patrol, PatrolConfig
 from agent.phase import position_to_phase, wrap_pi
 from simworld.maps import load_map
 from simworld.world import World
@@ -337,3 +337,40 @@ def test_a_robot_counts_sweeps_with_its_lower_neighbour():
     assert out.turns == pytest.approx(lower.turns + wrap_pi(out.phase_des - lower.phase_des))
     assert ctrl.patrol.clock == pytest.approx(out.turns / math.pi)
     assert round(ctrl.patrol.clock) == 40
+
+
+def test_a_way_in_that_began_under_the_ice_measures_nothing():
+    """An agent started where its robot stood (a restart) may begin under the ice: it
+    crossed no edge, so neither the edge nor the depth of that leg is recorded."""
+    cfg = PatrolConfig()
+    dm = DepthMap(0.0, 0.1, cfg.min_depth_m)
+    patrol = Patrol(cfg, dm, x=0.55)
+    track = [(1.0 + 0.05 * i, math.pi / 2, True, i < 3) for i in range(12)]
+    motions = drive(patrol, track)
+    assert Motion.UNDER in motions and patrol.last_depth is not None
+    assert dm.depths == {} and dm.crossings == {}
+
+
+def test_a_robot_hurrying_to_catch_up_measures_nothing_slowly():
+    cfg = PatrolConfig()
+    dm = DepthMap(0.0, 0.1, cfg.min_depth_m)
+    patrol = Patrol(cfg, dm, x=0.55)
+    patrol.hurry = True
+    track = [(-0.1, math.pi / 2, False, False)] + [
+        (-0.025 + 0.05 * i, math.pi / 2, True, i < 18) for i in range(22)]
+    steers = [patrol.step(0.55, y, th, ice, algae, 0.0, 2.0)
+              for y, th, ice, algae in track]
+    assert not any(s.measuring for s in steers)  # not even in a column never measured
+    assert dm.kind[5] == ROUGH  # its sample counts for less than a slow one
+    dm.record(0.55, 0.9)
+    assert dm.kind[5] == PRECISE and dm.depths[5] == 0.9
+
+
+def test_a_controller_well_behind_its_desired_phase_hurries():
+    ctrl = Controller(0, 0.0, 2.0, 0.0, 6.0, x=1.0)
+    for _ in range(2):
+        out = ctrl.step(0.1, 1.0, -0.3, math.pi / 2, False, False, None, None, False, False)
+    assert not ctrl.patrol.hurry
+    ctrl.phase_des = out.phase + 0.6  # the team is 0.6 rad ahead of this robot
+    ctrl.step(0.1, 1.0, -0.3, math.pi / 2, False, False, None, None, False, False)
+    assert ctrl.patrol.hurry
