@@ -121,7 +121,8 @@ def suite_markdown(cases: list[dict[str, Any]], settings: dict[str, Any], below:
 
 
 def suite_figure(cases: list[dict[str, Any]], path: Path) -> None:
-    """Grouped bars, log scale: our steady-state errors beside the thesis's, per case."""
+    """Grouped bars, log scale: our steady-state errors beside the thesis's, per case,
+    with the goal (a fifth of the thesis's) marked over ours."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -130,7 +131,7 @@ def suite_figure(cases: list[dict[str, Any]], path: Path) -> None:
 
     labels = [f"{c.get('map')}\n{c.get('start')}" for c in cases]
     x = np.arange(len(cases))
-    fig, axes = plt.subplots(2, 1, figsize=(max(8, 1.1 * len(cases)), 7), sharex=True)
+    fig, axes = plt.subplots(2, 1, figsize=(max(8, 1.1 * len(cases)) + 2.5, 7), sharex=True)
     panels = (("phase_sse_rad", "thesis_phase_sse_rad", "phase steady-state error (rad)"),
               ("workload_sse_m2", "thesis_workload_sse_m2",
                "workload steady-state error (m^2)"))
@@ -140,10 +141,13 @@ def suite_figure(cases: list[dict[str, Any]], path: Path) -> None:
         ax.bar(x - 0.2, theirs, 0.4, label="thesis (tables 7.1, 7.2)", color="#bbbbbb")
         ax.bar(x + 0.2, np.maximum(np.asarray(ours, dtype=float), 1e-5), 0.4, label="ours",
                color="#1f77b4")
+        ax.hlines(np.asarray(theirs, dtype=float) / 5.0, x, x + 0.4, colors="black",
+                  linewidth=1.5, label="goal: a fifth of the thesis's")
         ax.set_yscale("log")
         ax.set_title(title)
         ax.grid(True, axis="y", alpha=0.3, which="both")
-        ax.legend(fontsize=8)
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0))
+        ax.set_xlim(-0.6, len(cases) - 0.4)
     axes[-1].set_xticks(x, labels, fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
