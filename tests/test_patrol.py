@@ -3,6 +3,7 @@ the pure simulator (no bus): errors shrink, boundaries stay ordered."""
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 import statistics
@@ -374,3 +375,31 @@ def test_a_controller_well_behind_its_desired_phase_hurries():
     ctrl.phase_des = out.phase + 0.6  # the team is 0.6 rad ahead of this robot
     ctrl.step(0.1, 1.0, -0.3, math.pi / 2, False, False, None, None, False, False)
     assert ctrl.patrol.hurry
+
+
+def test_a_neighbours_measurement_beats_a_sample_taken_on_the_bins_side():
+    dm = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3)
+    dm.record(0.25, 1.4)
+    dm.record(0.199, 0.77)  # bin 1's side: maybe bin 2's column
+    assert dm.average(0.1, 0.2) == pytest.approx(0.77)  # better than nothing
+    dm.learn(((1, 1.39),))
+    assert dm.average(0.1, 0.2) == pytest.approx(1.39)
+
+
+def test_the_arc_that_begins_a_sweep_steps_at_the_middle_of_its_step():
+    """At a reversal the robot's phase at its line jumps (eq. 3.1 reads the same place
+    from the other end); the arc waits for the middle between that phase and the next
+    line's, as any arc, so robots whose last lines differ still step together."""
+    ctrl = Controller(0, 0.0, 2.0, 0.0, 6.0, x=1.95)
+    ctrl.step(0.1, 1.95, -0.4, -math.pi / 2, False, False, None, None, False, True)
+    p = ctrl.patrol
+    p.motion, p.arc_from, p.direction, p.line_x, p.turned = (
+        Motion.TURN_OUT, (1.95, 1), -1, 1.75, 0.0)
+    start = position_to_phase(1.95, 0.0, 2.0, -1)  # pi + 0.0785, not 3.06 going up
+    middle = start + 0.5 * (position_to_phase(1.75, 0.0, 2.0, -1) - start)
+    for lead, moving in ((-0.01, False), (0.01, True)):
+        assert ctrl.published is not None  # the desired phase goes on from what it published
+        ctrl.published = dataclasses.replace(
+            ctrl.published, phase_des=middle + lead - ctrl.gains.phase_rate * 0.1)
+        out = ctrl.step(0.1, 1.95, -0.4, -math.pi / 2, False, False, None, None, False, True)
+        assert (out.v > 0) is moving, (lead, out.phase_des, middle)
