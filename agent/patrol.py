@@ -213,9 +213,11 @@ class DepthMap:
                 continue
             while j + 1 < len(known) and abs(known[j + 1] - b) <= abs(known[j] - b):
                 j += 1
-            depth = self.depths.get(b)
-            if self.kind.get(b, SUSPECT) == SUSPECT:  # none, or taken on the bin's side
-                depth = self.shared.get(b, self.depths[known[j]] if depth is None else depth)
+            own = self.depths.get(b)
+            if own is not None and self.kind.get(b, SUSPECT) > SUSPECT:
+                depth = own
+            else:  # none, or taken on the bin's side
+                depth = self.shared.get(b, self.depths[known[j]] if own is None else own)
             total += (b_hi - b_lo) * depth
         return total / (hi - lo)
 
