@@ -200,6 +200,14 @@ def teams(tmp_path_factory):
     return {t.name: t for t in both}
 
 
+# The phase moves one pass at a time (agent.phase.pass_speed): with 4 passes a step is
+# 0.63 rad (the 0.4 m widest pass), and on the impaired link robots step up to a few
+# ticks apart, so the smoothed worst pair settles at 0.05-0.22 rad (measured over seven
+# runs) where the clean team's settles at 0.05-0.07. The impaired team must converge
+# to within half a step; the clean one to the report's band.
+IMPAIRED_PHASE_BAND_RAD = 0.3
+
+
 def _pre_cut_convergence(team: Team) -> dict[str, float]:
     from report.load import load_run
     from report.measures import converge_time, max_over_pairs, running_mean
@@ -213,7 +221,8 @@ def _pre_cut_convergence(team: Team) -> dict[str, float]:
     smooth = running_mean(t, max_over_pairs(phase), CONVERGE_SMOOTH_S)
     first = np.nanmean(np.abs(phase[:, t < 10.0]))
     last = np.nanmean(np.abs(phase[:, t > team.cut_t - 10.0]))
-    return {"converge_s": float(converge_time(t, phase, PHASE_BAND_RAD, CONVERGE_SMOOTH_S)),
+    band = IMPAIRED_PHASE_BAND_RAD if team.impaired else PHASE_BAND_RAD
+    return {"converge_s": float(converge_time(t, phase, band, CONVERGE_SMOOTH_S)),
             "phase_first_10s_rad": float(first), "phase_last_10s_rad": float(last),
             "smoothed_max_at_cut_rad": float(smooth[-1])}
 
