@@ -189,7 +189,7 @@ class Controller:
         p = self.patrol
         v = pass_speed(
             self.phase_des, phase,
-            position_to_phase(p.arc_from[0], self.lo, self.hi, p.direction),
+            position_to_phase(p.arc_from_x, self.lo, self.hi, p.direction),
             position_to_phase(p.line_x, self.lo, self.hi, p.direction),
             on_leg, steer.measuring, p.turned > 0.05, self.limits.v_max,
             p.config.measure_speed,

@@ -241,7 +241,7 @@ class Patrol:
         self.motion = Motion.ENTER
         self.direction = 1 if direction >= 0 else -1
         self.line_x = x  # the pass line the straight legs hold
-        self.arc_from = (x, self.direction)  # the line and direction the last arc left
+        self.arc_from_x = x  # the line the last arc left
         self.x = x  # where the robot is
         self.clock: float | None = None  # the team's sweep clock, set by the controller
         self.entry_y: float | None = None  # where the ice edge was seen on the way in
@@ -308,7 +308,7 @@ class Patrol:
         """Choose the next pass line, then the arc from where the robot is onto it."""
         c = self.config
         line, direction, new_sweep = self._plan(lo, hi, heading_in)
-        self.arc_from = (self.line_x, self.direction)
+        self.arc_from_x = self.line_x
         self.sweeps += new_sweep
         self.direction = direction
         self.line_x = line

@@ -393,8 +393,8 @@ def test_the_arc_that_begins_a_sweep_steps_at_the_middle_of_its_step():
     ctrl = Controller(0, 0.0, 2.0, 0.0, 6.0, x=1.95)
     ctrl.step(0.1, 1.95, -0.4, -math.pi / 2, False, False, None, None, False, True)
     p = ctrl.patrol
-    p.motion, p.arc_from, p.direction, p.line_x, p.turned = (
-        Motion.TURN_OUT, (1.95, 1), -1, 1.75, 0.0)
+    p.motion, p.arc_from_x, p.direction, p.line_x, p.turned = (
+        Motion.TURN_OUT, 1.95, -1, 1.75, 0.0)
     start = position_to_phase(1.95, 0.0, 2.0, -1)  # pi + 0.0785, not 3.06 going up
     middle = start + 0.5 * (position_to_phase(1.75, 0.0, 2.0, -1) - start)
     for lead, moving in ((-0.01, False), (0.01, True)):
