@@ -90,8 +90,7 @@ def run_case(case: Case) -> dict[str, Any]:
                 published[i + 1] if i + 1 < ROBOTS else None,
                 i > 0, i + 1 < ROBOTS,
             )
-            now.append(Neighbour(i, out.lo, out.hi, out.phase_des, out.workload, out.turns,
-                                 out.end_depths))
+            now.append(controllers[i].published)  # what agent i puts on the bus
             cmds[i] = (out.v, out.omega)
             x[i, k], y[i, k] = world.truth(i)[:2]
             lo[i, k], hi[i, k], direction[i, k] = out.lo, out.hi, out.direction
