@@ -26,6 +26,7 @@ from agent.phase import wrap_pi
 from agent.stability import check_gains
 from deploy import faults
 from deploy.procs import (
+    AGENT_FLAGS,
     ODOM_FLAGS,
     Child,
     ProcessGroup,
@@ -95,15 +96,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--hil-faults", type=float, metavar="P",
                    help="with --hil: fraction of device messages damaged on purpose (0.005)")
     return p
-
-
-def _agent_args(args: argparse.Namespace) -> list[str]:
-    out: list[str] = []
-    for flag in ("config", "k_s", "k_phi", "cycle_s", "passes"):
-        value = getattr(args, flag)
-        if value is not None:
-            out += ["--" + flag.replace("_", "-"), str(value)]
-    return out
 
 
 class Monitor:
@@ -288,8 +280,8 @@ def run(args: argparse.Namespace) -> int:
                     return _fail(group, recorder, f"did not come up within {STARTUP_S:g} s")
             def agent_args(i: int) -> list[str]:
                 team = args.robots if i < args.robots else bodies
-                return ["agent", "--id", str(i), "--robots", str(team), *_agent_args(args),
-                        *member]
+                return ["agent", "--id", str(i), "--robots", str(team),
+                        *forward_flags(args, AGENT_FLAGS), *member]
 
             injector = Injector(session, keys, schedule, group, agent_args)
             for i in range(args.robots):

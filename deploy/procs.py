@@ -48,6 +48,8 @@ def stop_interrupted(group: ProcessGroup, exc: KeyboardInterrupt, who: str) -> i
 
 
 ODOM_FLAGS = ("odom_noise", "odom_turn_noise")  # sim and suite pass them on to the world
+# the agent options that sim, suite and the hardware loop pass on to every agent
+AGENT_FLAGS = ("config", "k_s", "k_phi", "cycle_s", "passes")
 
 
 def non_negative(text: str) -> float:
@@ -62,12 +64,13 @@ def non_negative(text: str) -> float:
 
 
 def forward_flags(args: argparse.Namespace, names: tuple[str, ...]) -> list[str]:
-    """The options ``names`` that were given, as command-line flags for a child."""
+    """The options ``names`` that were given (the parser may lack some), as
+    command-line flags for a child."""
     out: list[str] = []
     for name in names:
-        value = getattr(args, name)
+        value = getattr(args, name, None)
         if value is not None:
-            out += ["--" + name.replace("_", "-"), repr(value)]
+            out += ["--" + name.replace("_", "-"), str(value)]
     return out
 
 

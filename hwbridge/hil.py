@@ -22,7 +22,14 @@ from typing import Any
 
 import zenoh
 
-from deploy.procs import Child, ProcessGroup, free_port, stop_interrupted
+from deploy.procs import (
+    AGENT_FLAGS,
+    Child,
+    ProcessGroup,
+    forward_flags,
+    free_port,
+    stop_interrupted,
+)
 from simworld.maps import MapError, load_map
 from wire import Keys
 from wire.session import SessionOptions, open_session
@@ -31,15 +38,6 @@ DEFAULT_FAULTS = 0.005  # one device message in 200 damaged on purpose
 # On the wall clock an agent must not wait for a late neighbour longer than the bridge's
 # watchdog (0.5 s) lets its robot run without a command.
 NEIGHBOUR_TIMEOUT_S = 0.3
-
-
-def _agent_args(args: argparse.Namespace) -> list[str]:
-    out: list[str] = []
-    for flag in ("config", "k_s", "k_phi", "cycle_s", "passes"):
-        value = getattr(args, flag, None)
-        if value is not None:
-            out += ["--" + flag.replace("_", "-"), str(value)]
-    return out
 
 
 def _last_json(child: Child) -> dict[str, Any]:
@@ -153,7 +151,7 @@ def run(args: argparse.Namespace) -> int:
                                              "--baud", "38400", *epoch, *member])
             agents = [group.start(f"agent{i}", [
                 "agent", "--id", str(i), "--robots", str(n), "--neighbour-timeout",
-                str(NEIGHBOUR_TIMEOUT_S), *_agent_args(args), *member])
+                str(NEIGHBOUR_TIMEOUT_S), *forward_flags(args, AGENT_FLAGS), *member])
                 for i in range(n)]
             last_print = time.monotonic()
             while world.alive() and not _last_json(world):
