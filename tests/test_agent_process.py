@@ -146,6 +146,10 @@ def test_agent_restarted_in_a_running_team_claims_between_its_neighbours(bus, tm
         when_subscribed(pub0, pub2)
         pub0.put(encode(neighbour_state(0, 501, 0.0, 2.0)))
         pub2.put(encode(neighbour_state(2, 500, 3.0, 6.0)))
+        # The case is these states being in before the tick: the bus does not order them
+        # against the sensing on other keys, so give them time to arrive (a real world's
+        # next tick comes 0.1 s after the states of the last one).
+        time.sleep(0.3)
         sense_and_pose(session, keys, 501)
         state = states.get(timeout=10)
         assert state.k == 501 and (state.lower, state.upper) == (0, 2)
