@@ -249,12 +249,31 @@ def load_png(path: str | Path, scale_m_per_px: float = 0.05) -> GridMap:
     return gmap
 
 
+def write_png(gmap: GridMap, path: str | Path) -> None:
+    """The map as ``load_png`` reads it: one pixel per cell in the thesis's colours,
+    image row 0 the top, so ``load_png(path, gmap.cell_m)`` gives back the same grids."""
+    from PIL import Image
+
+    palette = np.array([WATER_RGB, ICE_RGB, ALGAE_RGB], dtype=np.uint8)
+    kind = gmap.ice.astype(np.uint8) + gmap.algae.astype(np.uint8)  # algae is under ice
+    Image.fromarray(palette[kind[::-1]], mode="RGB").save(path, format="PNG")
+
+
+MAP_CHOICES = (
+    f"{', '.join(BUILTIN_NAMES)}, procedural:SEED[,length=..,edge=..,amplitude=..,algae=..]"
+    " or a .png file"
+)
+
+
 def load_map(name_or_path: str, scale_m_per_px: float = 0.05, seed: int = 1) -> GridMap:
-    """A built-in map by name, or a PNG file by path."""
+    """A built-in map by name, a procedural one by its spec (simworld.procedural; its
+    seed is in the name, built at the built-ins' cell), or a PNG file by path."""
     if name_or_path in BUILTIN_NAMES:
         return builtin_map(name_or_path, seed=seed)
+    if name_or_path.startswith("procedural:"):
+        from simworld.procedural import procedural_map  # it imports this module
+
+        return procedural_map(name_or_path, BUILTIN_CELL_M)
     if name_or_path.lower().endswith(".png") or Path(name_or_path).exists():
         return load_png(name_or_path, scale_m_per_px)
-    raise MapError(
-        f"unknown map {name_or_path!r}: use one of {', '.join(BUILTIN_NAMES)} or a .png file"
-    )
+    raise MapError(f"unknown map {name_or_path!r}: use one of {MAP_CHOICES}")
