@@ -54,7 +54,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--robots", type=int, default=3, help="team size (default 3)")
     p.add_argument("--map", default="half-algae",
-                   help="no-algae | half-algae | random-algae | FILE.png (default half-algae)")
+                   help="no-algae | half-algae | random-algae | FILE.png | "
+                   "procedural:SEED[,length=..,edge=..,amplitude=..,algae=..] (see btrack maps) "
+                   "(default half-algae)")
     p.add_argument("--scale", type=float, default=0.05, help="PNG map metres per pixel")
     p.add_argument("--start", default="ahead:1",
                    help="in-phase | ahead:K (robot K starts 72 deg ahead; default ahead:1)")

@@ -71,7 +71,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--map",
         default="half-algae",
-        help="no-algae | half-algae | random-algae | FILE.png (default half-algae)",
+        help="no-algae | half-algae | random-algae | FILE.png | "
+        "procedural:SEED[,length=..,edge=..,amplitude=..,algae=..] (see btrack maps) "
+        "(default half-algae)",
     )
     p.add_argument("--scale", type=float, default=0.05, help="PNG metres per pixel (0.05)")
     p.add_argument("--start", default="in-phase", help="in-phase | ahead:K (default in-phase)")
@@ -275,7 +277,7 @@ class WorldProcess:
     def publish_info(self) -> None:
         a = self.args
         info = WorldInfo(
-            map=a.map,
+            map=self.world.map.name,  # a procedural map's full spec, which rebuilds it
             start=a.start,
             robots=self.n,
             localization=a.localization,
