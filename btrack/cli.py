@@ -13,6 +13,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "sim": ("deploy.launcher", "run a simulated team: world, recorder and N agents"),
     "agent": ("agent.process", "one robot's controller (meant for the robot's own computer)"),
     "world": ("simworld.process", "the simulator: maps, kinematics, sensors, the clock"),
+    "maps": ("simworld.mapgen", "write seeded procedural maps as PNG files, with maps.json"),
     "localizer": ("localizer.process", "laser localisation: one particle filter per robot"),
     "record": ("recorder.process", "record everything on the bus into an MCAP file"),
     "report": ("report.cli", "measures, summary.json and figures from a recorded run"),
