@@ -9,39 +9,47 @@ import math
 from dataclasses import dataclass
 
 from agent.partition import SegmentView, shared_boundary
-from agent.patrol import DepthMap, Motion, Patrol, PatrolConfig
+from agent.patrol import DepthMap, Motion, Patrol, PatrolConfig, Steer
 from agent.phase import (
     TWO_PI,
+    arc_may_begin,
     boundary_phase_shift,
     consensus_term,
     desired_phase_step,
+    leg_speed,
     limit_lead,
-    pass_speed,
     position_to_phase,
     wrap_pi,
 )
+from agent.team import TeamRate, chain_max, cycle_for, passes_for, team_max
 
-SHARED_REACH_M = 0.3  # a robot tells its neighbours its depths this close to its ends
+# A robot tells its neighbours its depths this close to its ends: at least 0.3 m, and
+# half its segment, as far as a boundary can move into it before the neighbour would
+# measure those columns itself.
+SHARED_REACH_M = 0.3
+SHARED_REACH_FRACTION = 0.5
 HURRY_RAD = 0.4  # a robot this far behind its desired phase measures nothing slowly
+AHEAD_WAIT_RAD = 0.5  # a robot this far ahead of its desired phase waits on its leg
 
 
 @dataclass(frozen=True)
 class Gains:
     k_s: float = 0.01  # boundary step per m^2 of workload error per tick (eq. 4.3)
     k_phi: float = 0.3  # phase consensus gain per tick (eq. 4.7); < 1/2 is stable for any n
-    cycle_s: float = 200.0  # period of the common cycle: phi_dot_des = 2 pi / cycle_s
+    # The common cycle, phi_dot_des = 2 pi / cycle: 0 derives it from the team's need
+    # (agent.team); a positive value fixes it, in seconds.
+    cycle_s: float = 0.0
+    cycle_margin: float = 1.15  # the cycle gives the slowest robot this much slack
     max_lead_rad: float = 1.0  # the desired phase stays this close to the actual one
     min_segment_m: float = 0.3
 
     def __post_init__(self) -> None:
         if self.k_s <= 0 or self.k_phi <= 0:
             raise ValueError("gains must be positive")
-        if self.cycle_s <= 0 or self.max_lead_rad <= 0 or self.min_segment_m <= 0:
-            raise ValueError("cycle_s, max_lead_rad and min_segment_m must be positive")
-
-    @property
-    def phase_rate(self) -> float:
-        return TWO_PI / self.cycle_s
+        if self.cycle_s < 0 or self.max_lead_rad <= 0 or self.min_segment_m <= 0:
+            raise ValueError("cycle_s must be >= 0, max_lead_rad and min_segment_m positive")
+        if not self.cycle_margin >= 1.0:
+            raise ValueError("cycle_margin must be at least 1 (the slowest robot's need)")
 
 
 @dataclass(frozen=True)
@@ -61,6 +69,15 @@ class Neighbour:
     workload: float
     turns: float = 0.0  # its desired phase unwrapped, rad: the team's sweep count
     depths: tuple[tuple[int, float], ...] = ()  # (bin, depth) it measured near its ends
+    # The team's decision as it took it (agent.team): 0 for not known
+    cycle_s: float = 0.0
+    passes: int = 0
+    # The chain maxima of each robot's pass need (s) and segment length (m): over the
+    # robots at or below it, and at or above it; 0 for not known
+    need_below: float = 0.0
+    need_above: float = 0.0
+    span_below: float = 0.0
+    span_above: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -77,6 +94,8 @@ class Output:
     motion: Motion
     turns: float = 0.0  # phi_des unwrapped, rad
     end_depths: tuple[tuple[int, float], ...] = ()  # its depths near its ends
+    cycle_s: float = 0.0  # the team cycle it follows
+    passes: int = 0  # the team's passes per sweep
 
 
 def wheel_limited(v: float, omega: float, limits: RobotLimits) -> tuple[float, float]:
@@ -117,6 +136,38 @@ class Controller:
         self.phase_des: float | None = None
         self.turns = 0.0  # phi_des unwrapped: the count of sweeps the pass grid walks by
         self.published: Neighbour | None = None  # what we told the neighbours last tick
+        self.rate = TeamRate()  # the cycle, when this robot is the chain's root
+        self.passes: int | None = None  # the team's passes per sweep, when known
+        self.cycle_s = self.gains.cycle_s
+
+    def _agree(self, dt: float, lower: Neighbour | None, upper: Neighbour | None,
+               has_lower: bool, has_upper: bool) -> tuple[float, int, tuple[float, ...]]:
+        """The team's cycle and passes per sweep (agent.team), and this robot's chain
+        maxima to publish. The root decides from the chain's maxima; every other robot
+        takes its lower neighbour's decision."""
+        g, cfg, lim = self.gains, self.patrol.config, self.limits
+        need = self.patrol.pass_need_s(self.lo, self.hi, lim.v_max, lim.wheel_base_m)
+        span = self.hi - self.lo
+        lo_nb = lower if has_lower else None
+        up_nb = upper if has_upper else None
+
+        def heard(nb: Neighbour | None, value: float) -> float | None:
+            return value if nb is not None and value > 0 else None
+
+        needs = chain_max(need, heard(lo_nb, lo_nb.need_below if lo_nb else 0.0),
+                          heard(up_nb, up_nb.need_above if up_nb else 0.0))
+        spans = chain_max(span, heard(lo_nb, lo_nb.span_below if lo_nb else 0.0),
+                          heard(up_nb, up_nb.span_above if up_nb else 0.0))
+        if lo_nb is not None and lo_nb.passes > 0 and lo_nb.cycle_s > 0:
+            passes, cycle = lo_nb.passes, lo_nb.cycle_s
+            self.rate.cycle_s = cycle  # were it to become the root, it goes on from here
+        else:
+            team_need = team_max(need, None, needs.above)
+            passes = passes_for(team_max(span, None, spans.above), cfg.max_spacing_m,
+                                cfg.passes_per_sweep, self.passes)
+            target = cycle_for(team_need, passes, g.cycle_margin)
+            cycle = g.cycle_s if g.cycle_s > 0 else self.rate.update(target, dt)
+        return cycle, passes, (needs.below, needs.above, spans.below, spans.above)
 
     def _update_boundaries(self, lower: Neighbour | None, upper: Neighbour | None,
                            has_lower: bool, has_upper: bool) -> None:
@@ -168,6 +219,9 @@ class Controller:
         if before is not None and self.published is not None:
             lag = wrap_pi(before - position_to_phase(x, self.lo, self.hi, self.patrol.direction))
             self.patrol.hurry = lag > HURRY_RAD
+        self.cycle_s, self.passes, chain = self._agree(dt, lower, upper, has_lower, has_upper)
+        self.patrol.team_passes = self.passes
+        rate = TWO_PI / self.cycle_s
         steer = self.patrol.step(x, y, theta, ice, algae, self.lo, self.hi)
         direction = self.patrol.direction
         phase = position_to_phase(x, self.lo, self.hi, direction)
@@ -182,28 +236,43 @@ class Controller:
                 upper.phase_des if (has_upper and upper) else None,
                 g.k_phi,
             )
-            self.phase_des = desired_phase_step(mine, g.phase_rate, dt, shift, consensus)
+            self.phase_des = desired_phase_step(mine, rate, dt, shift, consensus)
         self.phase_des = limit_lead(self.phase_des, phase, g.max_lead_rad)
         self._count_turns(before, lower if has_lower else None)
-        on_leg = steer.motion in (Motion.ENTER, Motion.UNDER, Motion.EXIT)
-        p = self.patrol
-        v = pass_speed(
-            self.phase_des, phase,
-            position_to_phase(p.arc_from_x, self.lo, self.hi, p.direction),
-            position_to_phase(p.line_x, self.lo, self.hi, p.direction),
-            on_leg, steer.measuring, p.turned > 0.05, self.limits.v_max,
-            p.config.measure_speed,
-        )
+        v = self._speed(steer, phase, rate, y)
         v, omega = wheel_limited(v, v * steer.curvature, self.limits)
         depth_avg = self.depth_map.average(self.lo, self.hi)
         workload = depth_avg * (self.hi - self.lo)
-        ends = self.depth_map.near_ends(self.lo, self.hi, SHARED_REACH_M)
+        reach = max(SHARED_REACH_M, SHARED_REACH_FRACTION * (self.hi - self.lo))
+        ends = self.depth_map.near_ends(self.lo, self.hi, reach)
         self.published = Neighbour(self.robot, self.lo, self.hi, self.phase_des, workload,
-                                   self.turns, ends)
+                                   self.turns, ends, self.cycle_s, self.passes, *chain)
         return Output(
             v, omega, self.lo, self.hi, phase, self.phase_des, workload, depth_avg,
-            direction, steer.motion, self.turns, ends,
+            direction, steer.motion, self.turns, ends, self.cycle_s, self.passes,
         )
+
+    def _speed(self, steer: Steer, phase: float, rate: float, y: float) -> float:
+        """Forward speed along the patrol (agent.phase.leg_speed, arc_may_begin): legs
+        paced to end when the next arc is due, each arc begun so that its middle falls
+        on the middle of its step of the team's phase."""
+        assert self.phase_des is not None
+        p, lim = self.patrol, self.limits
+        lead = 0.5 * rate * p.arc_time_s(self.lo, self.hi, lim.v_max, lim.wheel_base_m)
+        if steer.motion in (Motion.ENTER, Motion.UNDER, Motion.EXIT):
+            if wrap_pi(self.phase_des - phase) < -AHEAD_WAIT_RAD:
+                return 0.0  # well ahead of the team (one started ahead): let it come
+            level = position_to_phase(p.line_x, self.lo, self.hi, p.direction)
+            middle = level + 0.5 * math.pi / p.passes
+            time_left = wrap_pi(middle - lead - self.phase_des) / rate
+            fast, slow = p.to_go(y, self.lo, self.hi)
+            return leg_speed(time_left, fast, slow, steer.measuring, lim.v_max,
+                             p.config.measure_speed, p.config.min_leg_speed)
+        if p.turned > 0.05 or self.patrol.hurry or arc_may_begin(
+                self.phase_des, position_to_phase(p.arc_from_x, self.lo, self.hi, p.direction),
+                position_to_phase(p.line_x, self.lo, self.hi, p.direction), lead):
+            return lim.v_max
+        return 0.0
 
     def _count_turns(self, before: float | None, lower: Neighbour | None) -> None:
         """Unwrap the desired phase into the sweep clock the pass grid walks by. A

@@ -54,7 +54,8 @@ class PatrolConfig:
     margin_out_m: float = 0.3
     max_depth_m: float = 5.0  # turn back regardless, in case a sensor fails
     max_search_m: float = 2.0  # how far in to look for the edge before giving up
-    passes_per_sweep: int = 16
+    passes_per_sweep: int = 16  # at least; the team makes more on long segments
+    max_spacing_m: float = 0.3  # passes at most this far apart (a robot's width, about)
     min_turn_radius_m: float = 0.035
     max_turn_radius_m: float = 0.2
     heading_gain: float = 4.0  # curvature per rad of heading error, 1/m
@@ -66,12 +67,16 @@ class PatrolConfig:
     measure_speed: float = 0.1  # m/s there (1 cm of depth per 10 Hz tick)
     edge_zone_m: float = 0.08  # slow down this close before a known edge (ice, algae out)
     turn_margin_m: float = 0.05  # turn under the ice this far past the next pass's algae
+    min_leg_speed: float = 0.025  # m/s: legs are paced to the team, never slower than this
 
     def __post_init__(self) -> None:
         if self.passes_per_sweep < 1:
             raise ValueError("passes_per_sweep must be at least 1")
         if not 0 < self.min_turn_radius_m <= self.max_turn_radius_m:
             raise ValueError("need 0 < min_turn_radius_m <= max_turn_radius_m")
+        if not 0 < self.max_spacing_m <= 2 * self.max_turn_radius_m:
+            raise ValueError("max_spacing_m must be positive and at most two "
+                             "max_turn_radius_m (an arc joins two passes)")
         if (self.min_depth_m <= 0 or self.margin_out_m <= 0 or self.bin_m <= 0
                 or self.max_search_m <= 0):
             raise ValueError("depths, margin, search distance and bin must be positive")
@@ -198,26 +203,37 @@ class DepthMap:
     def average(self, lo: float, hi: float) -> float:
         """d_a over [lo, hi]: length-weighted mean of the measured profile, each bin
         not measured (or only on its side) taking a neighbour's value for it, else its
-        own side sample, else its nearest measured bin; ``default_m`` if none is."""
+        own side sample, else the line between the nearest measured bins either side of
+        it (the nearest one's value beyond the last); ``default_m`` if none is."""
         if not self.depths or hi <= lo:
             return self.default_m
         known = sorted(self.depths)
         first = int(math.floor((lo - self.edge_lo) / self.bin_m))
         last = int(math.floor((hi - self.edge_lo) / self.bin_m))
         total = 0.0
-        j = 0
+        j = 0  # known[j] is the last known bin at or below b, if any is
         for b in range(first, last + 1):
             b_lo = max(lo, self.edge_lo + b * self.bin_m)
             b_hi = min(hi, self.edge_lo + (b + 1) * self.bin_m)
             if b_hi <= b_lo:
                 continue
-            while j + 1 < len(known) and abs(known[j + 1] - b) <= abs(known[j] - b):
+            while j + 1 < len(known) and known[j + 1] <= b:
                 j += 1
             own = self.depths.get(b)
             if own is not None and self.kind.get(b, SUSPECT) > SUSPECT:
                 depth = own
-            else:  # none, or taken on the bin's side
-                depth = self.shared.get(b, self.depths[known[j]] if own is None else own)
+            elif b in self.shared:
+                depth = self.shared[b]
+            elif own is not None:  # taken on the bin's side
+                depth = own
+            elif b < known[0]:
+                depth = self.depths[known[0]]
+            elif j + 1 >= len(known):
+                depth = self.depths[known[-1]]
+            else:
+                below, above = known[j], known[j + 1]
+                frac = (b - below) / (above - below)
+                depth = (1 - frac) * self.depths[below] + frac * self.depths[above]
             total += (b_hi - b_lo) * depth
         return total / (hi - lo)
 
@@ -254,6 +270,11 @@ class Patrol:
         self.turn_sign = 0  # +1 left (counter-clockwise), -1 right
         self.turn_radius = config.max_turn_radius_m
         self.sweeps = 0  # reversals so far
+        # Passes per sweep: the team's number (``team_passes``, set by the controller
+        # from the chain's decision) taken at the start of each sweep, so a sweep's
+        # lines all lie on one grid.
+        self.passes = config.passes_per_sweep
+        self.team_passes = config.passes_per_sweep
         self.turned = 0.0  # rotation so far in the current arc, rad
         self.prev_theta: float | None = None
         self.last_depth: float | None = None
@@ -271,9 +292,9 @@ class Patrol:
         self.out_slow = False  # whether the out leg came upon the algae slowly
 
     def spacing(self, lo: float, hi: float) -> float:
-        c = self.config
-        raw = (hi - lo) / c.passes_per_sweep
-        return min(max(raw, 2 * c.min_turn_radius_m), 2 * c.max_turn_radius_m)
+        """The distance between passes: the segment over the team's passes per sweep,
+        unclamped, so every robot's phase steps by pi / passes at every arc."""
+        return (hi - lo) / self.passes
 
     def _plan(self, lo: float, hi: float, heading_in: bool) -> tuple[float, int, bool]:
         """The next pass line, the direction along the edge to it, and whether it
@@ -284,8 +305,11 @@ class Patrol:
             # The segment moved away from under the robot: head back at the widest pass.
             # (A line that the sum of its passes puts a rounding error past an end is
             # on it: taken for outside, it cost a 0.4 m pass off the team's grid.)
+            # Onto its first pass, half a pass inside, in arcs of at most the widest pass.
             direction = 1 if self.line_x < lo else -1
-            return self.line_x + direction * 2 * c.max_turn_radius_m, direction, False
+            target = lo + 0.5 * step if direction > 0 else hi - 0.5 * step
+            jump = min(2 * c.max_turn_radius_m, abs(target - self.line_x))
+            return self.line_x + direction * jump, direction, False
         direction = self.direction
         nxt = self.line_x + direction * step
         if lo <= nxt <= hi:
@@ -294,7 +318,7 @@ class Patrol:
         # robot wobbling off the ice's side would see 'no ice' under the ice
         end = hi - c.end_inset_m if direction > 0 else lo + c.end_inset_m
         room = max(0.0, (end - self.line_x) * direction)
-        if room >= max(0.25 * step, 2 * c.min_turn_radius_m):
+        if room >= 0.25 * step:
             return self.line_x + direction * room, direction, False  # a short last pass
         direction = -direction
         length = self._first_pass(lo, hi, step, heading_in, direction)
@@ -310,6 +334,8 @@ class Patrol:
         line, direction, new_sweep = self._plan(lo, hi, heading_in)
         self.arc_from_x = self.line_x
         self.sweeps += new_sweep
+        if new_sweep:
+            self.passes = self.team_passes
         self.direction = direction
         self.line_x = line
         self.turn_radius = min(c.max_turn_radius_m,
@@ -351,10 +377,9 @@ class Patrol:
         sweep count; each robot chooses which of its lines are in-legs (the pass
         length, up to two passes) by the staleness of the bins they sample."""
         assert self.clock is not None
-        c = self.config
         g = ((round(self.clock) // 2) * GOLDEN) % 1.0
         end = lo if direction > 0 else hi
-        shortest = max(FIRST_PASS_MIN * step, 2 * c.min_turn_radius_m)
+        shortest = FIRST_PASS_MIN * step
         best, best_score = None, -1
         for m in range(4):
             line = end + direction * (g + m) * step
@@ -398,6 +423,88 @@ class Patrol:
             inside = [d for b, d in dm.depths.items() if dm.bin_of(lo) <= b <= dm.bin_of(hi)]
             expected = max(inside, default=depth)
         return min(c.max_depth_m, max(depth, expected + c.turn_margin_m))
+
+    def _expected_depth(self, x: float, lo: float, hi: float) -> float:
+        """The patrol depth the map expects at ``x``: its bin's, else the deepest known
+        in [lo, hi], else the minimum."""
+        dm = self.depth_map
+        known = dm.depths.get(dm.bin_of(x))
+        if known is not None:
+            return known
+        return max(self.deepest(lo, hi), self.config.min_depth_m)
+
+    def deepest(self, lo: float, hi: float) -> float:
+        """The deepest patrol depth known in [lo, hi] (own or shared), else the minimum."""
+        dm = self.depth_map
+        first, last = dm.bin_of(lo), dm.bin_of(hi)
+        values = [d for b, d in dm.depths.items() if first <= b <= last]
+        values += [d for b, d in dm.shared.items() if first <= b <= last]
+        return max(values, default=self.config.min_depth_m)
+
+    def to_go(self, y: float, lo: float, hi: float) -> tuple[float, float]:
+        """What is left of this straight leg as the map expects it: (metres at full
+        speed, metres at the measuring speed, the zones of ``_measuring`` still ahead).
+        (0, 0) in an arc."""
+        c = self.config
+        dm = self.depth_map
+        edge = dm.edge_y(self.x)
+        known = dm.depths.get(dm.bin_of(self.x))
+        expected = max(c.min_depth_m, self._expected_depth(self.x, lo, hi))
+        turn = expected + c.turn_margin_m
+        zones: list[tuple[float, float]] = []
+        if self.motion is Motion.ENTER:
+            base = (y + c.margin_out_m) if edge is None else edge
+            end = base + turn
+            if edge is not None:
+                zones.append((edge - c.edge_zone_m, edge))  # ENTER ends at the edge
+        elif self.motion is Motion.UNDER:
+            base = self.entry_y if self.entry_y is not None else y
+            end = base + (self.turn_depth if self.turn_depth is not None else turn)
+        elif self.motion is Motion.EXIT:
+            out_edge = self.exit_y if self.exit_y is not None else (
+                edge if edge is not None else self.entry_y)
+            if out_edge is None:
+                return 0.0, 0.0
+            end = out_edge - c.margin_out_m
+            if (not self.hurry and self.out_algae_top is None
+                    and self.out_started_in_algae is not True and edge is not None
+                    and known is not None):
+                zones.append((edge + known, edge + known + c.edge_zone_m))
+        else:
+            return 0.0, 0.0
+        if self.motion in (Motion.ENTER, Motion.UNDER) and self.turn_depth is None:
+            if known is None:  # a new column: all its depth slowly
+                zones.append((base, base + turn))
+            else:
+                zones.append((base + known - c.measure_zone_m, base + known))
+        a, z = min(y, end), max(y, end)
+        slow = 0.0 if self.hurry else sum(max(0.0, min(z, top) - max(a, bottom))
+                                          for bottom, top in zones)
+        slow = min(slow, z - a)
+        return z - a - slow, slow
+
+    def arc_time_s(self, lo: float, hi: float, v_max: float, wheel_base_m: float) -> float:
+        """How long an arc between two passes takes at full speed, its outer wheel at
+        ``v_max`` (a tight arc is slow: the robot turns about a point near its wheel)."""
+        c = self.config
+        radius = min(c.max_turn_radius_m,
+                     max(0.5 * c.min_turn_radius_m, 0.5 * self.spacing(lo, hi)))
+        return math.pi * (radius + 0.5 * wheel_base_m) / v_max
+
+    def pass_need_s(self, lo: float, hi: float, v_max: float, wheel_base_m: float) -> float:
+        """The time this robot's hardest pass (a leg at the deepest depth it knows on its
+        segment, its measuring zones at the measuring speed, and an arc) takes when it
+        goes as fast as it may: what it needs of the team's rate."""
+        c = self.config
+        depth = max(c.min_depth_m, self.deepest(lo, hi))
+        leg = c.margin_out_m + depth + c.turn_margin_m
+        # the zones of ``_measuring``: up to the ice edge and the algae's end on the way
+        # in, up to the algae on the way out
+        slow_in = min(leg, c.edge_zone_m + c.measure_zone_m)
+        slow_out = min(leg, c.edge_zone_m)
+        speed = min(v_max, c.measure_speed)
+        legs = [(leg - slow) / v_max + slow / speed for slow in (slow_in, slow_out)]
+        return max(legs) + self.arc_time_s(lo, hi, v_max, wheel_base_m)
 
     def _hold_line(self, x: float, theta: float, heading: float) -> float:
         c = self.config

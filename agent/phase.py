@@ -91,28 +91,31 @@ def desired_phase_step(
     return wrap_2pi(natural + control)
 
 
-def pass_speed(phase_des: float, phase: float, level_from: float, level_to: float,
-               on_leg: bool, measuring: bool, arc_begun: bool, v_max: float,
-               v_measure: float, max_ahead: float = 0.5) -> float:
-    """Forward speed along the patrol: the desired phase tracked one pass at a time.
-
-    The position phase of eq. 3.1 stands still on a straight leg and steps from one
-    pass line's phase (``level_from``) to the next (``level_to``) in the arc between
-    them. Tracking the desired phase continuously with eq. 4.10 then leaves every
-    robot a sawtooth behind it, of a size set by its legs, so neighbours with deep and
-    shallow legs differ by it. Instead, a robot runs its legs at ``v_max`` (at
-    ``v_measure`` while ``measuring``, one 10 Hz tick being 5 cm at full speed) and
-    waits at the end of each leg until the desired phase reaches the middle of the
-    arc's step; then it drives the arc at ``v_max``. Every robot's phase is then the
-    same staircase, stepping when the team's desired phase crosses the middle of each
-    step, whatever its legs. A robot more than ``max_ahead`` ahead of its desired
-    phase (one that started ahead) waits on its leg too."""
-    if on_leg:
-        if wrap_pi(phase_des - phase) < -max_ahead:
-            return 0.0
-        return min(v_max, v_measure) if measuring else v_max
+def arc_may_begin(phase_des: float, level_from: float, level_to: float,
+                  lead: float = 0.0) -> bool:
+    """Whether the arc from the pass at phase ``level_from`` to the next (``level_to``)
+    may begin: once the desired phase is ``lead`` short of the middle of the step, so
+    that the robot's phase crosses the middle of the step (half way through the arc,
+    ``lead`` being half the arc's duration in phase) when the team's desired phase does.
+    Every robot's phase is then one staircase, stepping at the same moments whatever
+    its legs and its arcs."""
     middle = level_from + 0.5 * wrap_pi(level_to - level_from)
-    return v_max if arc_begun or wrap_pi(phase_des - middle) >= 0.0 else 0.0
+    return wrap_pi(phase_des - (middle - lead)) >= 0.0
+
+
+def leg_speed(time_left_s: float, fast_m: float, slow_m: float, measuring: bool,
+              v_max: float, v_measure: float, v_floor: float) -> float:
+    """Forward speed on a straight leg, eq. 4.10 taken one pass at a time: paced to
+    reach the leg's end (``fast_m`` to go at this speed, ``slow_m`` more at the
+    measuring speed) when the next arc is due, ``time_left_s`` from now, so a robot with
+    shallow legs drives them slowly instead of waiting at their ends; as fast as it may
+    once late. Never slower than ``v_floor`` (the arc waits for the team instead), and
+    at most ``v_measure`` while ``measuring``."""
+    slow_v = min(v_max, v_measure)
+    budget = time_left_s - slow_m / slow_v
+    v = v_max if budget <= 0.0 or fast_m <= 0.0 else min(v_max, fast_m / budget)
+    v = max(v, min(v_floor, v_max))
+    return min(v, slow_v) if measuring else v
 
 
 def limit_lead(phase_des: float, phase: float, max_lead: float) -> float:

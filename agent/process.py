@@ -48,8 +48,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="[gains], [patrol] and [limits] tables (see README)")
     p.add_argument("--k-s", type=float, help="workload gain K_s (eq. 4.3)")
     p.add_argument("--k-phi", type=float, help="phase consensus gain K_phi (eq. 4.7)")
-    p.add_argument("--cycle-s", type=float, help="common cycle period, s")
-    p.add_argument("--passes", type=int, help="passes per sweep of the segment")
+    p.add_argument("--cycle-s", type=float,
+                   help="fix the common cycle period, s (default: from the team's need)")
+    p.add_argument("--passes", type=int,
+                   help="at least this many passes per sweep of a segment (more on long ones)")
     p.add_argument("--max-depth", type=float, default=2.0,
                    help="deepest patrol expected, m, for the K_s stability check")
     p.add_argument("--neighbour-timeout", type=float, default=1.0,
@@ -200,7 +202,8 @@ class AgentNode:
         if s is None:
             return None
         return Neighbour(s.robot, s.lo, s.hi, s.phase_des, s.workload, s.turns,
-                         tuple(zip(s.end_bins, s.end_depths, strict=True)))
+                         tuple(zip(s.end_bins, s.end_depths, strict=True)), s.cycle_s,
+                         s.passes, s.need_below, s.need_above, s.span_below, s.span_above)
 
     def _first_segment(self, k: int, edge_lo: float, edge_hi: float) -> tuple[float, float]:
         """Equal initial segments when the team starts together (tick 0, or no
@@ -350,6 +353,8 @@ class AgentNode:
             self._neighbour_view(lower_id, k), self._neighbour_view(upper_id, k),
             lower_id is not None, upper_id is not None,
         )
+        me = self.controller.published
+        assert me is not None
         state = AgentState(
             t=sense.t, k=k, robot=self.robot, lo=out.lo, hi=out.hi, phase=out.phase,
             phase_des=out.phase_des, workload=out.workload, depth_avg=out.depth_avg,
@@ -358,6 +363,8 @@ class AgentNode:
             edge_lo=sense.edge_lo, edge_hi=sense.edge_hi, dropped=self.dropped,
             turns=out.turns, end_bins=[b for b, _ in out.end_depths],
             end_depths=[d for _, d in out.end_depths],
+            cycle_s=me.cycle_s, passes=me.passes, need_below=me.need_below,
+            need_above=me.need_above, span_below=me.span_below, span_above=me.span_above,
         )
         # The state before the command: the world cannot step (and start tick k+1) until
         # every command is in, so each neighbour's state of tick k is always out before

@@ -78,8 +78,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--config", metavar="FILE.toml", help="agent configuration for every agent")
     p.add_argument("--k-s", type=float, help="workload gain K_s per tick (eq. 4.3)")
     p.add_argument("--k-phi", type=float, help="phase consensus gain K_phi (eq. 4.7)")
-    p.add_argument("--cycle-s", type=float, help="common patrol cycle period, s")
-    p.add_argument("--passes", type=int, help="passes per sweep of a segment")
+    p.add_argument("--cycle-s", type=float,
+                   help="fix the common patrol cycle period, s (default: from the team's need)")
+    p.add_argument("--passes", type=int,
+                   help="at least this many passes per sweep of a segment (more on long ones)")
     p.add_argument("--ns", help="run namespace (default: a fresh one per run)")
     p.add_argument("--fault", action="append", default=[], metavar="SPEC",
                    help="inject a fault at a simulated time (repeatable): kill:I@T, "

@@ -397,9 +397,12 @@ def test_the_arc_that_begins_a_sweep_steps_at_the_middle_of_its_step():
         Motion.TURN_OUT, 1.95, -1, 1.75, 0.0)
     start = position_to_phase(1.95, 0.0, 2.0, -1)  # pi + 0.0785, not 3.06 going up
     middle = start + 0.5 * (position_to_phase(1.75, 0.0, 2.0, -1) - start)
+    rate = 2 * math.pi / ctrl.cycle_s
+    # the arc starts half its own duration early, so that its middle is the step's
+    early = 0.5 * rate * p.arc_time_s(0.0, 2.0, ctrl.limits.v_max, ctrl.limits.wheel_base_m)
     for lead, moving in ((-0.01, False), (0.01, True)):
         assert ctrl.published is not None  # the desired phase goes on from what it published
         ctrl.published = dataclasses.replace(
-            ctrl.published, phase_des=middle + lead - ctrl.gains.phase_rate * 0.1)
+            ctrl.published, phase_des=middle - early + lead - rate * 0.1)
         out = ctrl.step(0.1, 1.95, -0.4, -math.pi / 2, False, False, None, None, False, True)
         assert (out.v > 0) is moving, (lead, out.phase_des, middle)

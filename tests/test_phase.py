@@ -8,11 +8,12 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from agent.phase import (
+    arc_may_begin,
     boundary_phase_shift,
     consensus_term,
     desired_phase_step,
+    leg_speed,
     limit_lead,
-    pass_speed,
     phase_to_position,
     position_to_phase,
     wrap_2pi,
@@ -91,34 +92,45 @@ def test_consensus_pulls_towards_neighbours_and_ends_are_one_sided():
     assert consensus_term(0.05, None, 2 * math.pi - 0.05, 0.5) == pytest.approx(-0.05)
 
 
-def test_pass_speed_runs_legs_and_steps_each_arc_at_the_middle_of_its_step():
-    v_max, slow = 0.5, 0.1
+def test_an_arc_begins_when_the_desired_phase_is_a_lead_short_of_its_middle():
     step = (1.0, 1.2)  # the arc takes the phase from 1.0 to 1.2: its middle is 1.1
-    # on a leg: full speed whether behind or a little ahead, slowly where it measures
-    for phase_des in (0.95, 1.0, 1.3):
-        assert pass_speed(phase_des, 1.0, *step, True, False, False, v_max, slow) == v_max
-        assert pass_speed(phase_des, 1.0, *step, True, True, False, v_max, slow) == slow
-    # far ahead of the desired phase (more than max_ahead): wait on the leg
-    assert pass_speed(0.4, 1.0, *step, True, False, False, v_max, slow) == 0.0
-    # at an arc: wait until the desired phase reaches the middle of the step...
-    assert pass_speed(1.09, 1.0, *step, False, False, False, v_max, slow) == 0.0
-    assert pass_speed(1.1, 1.0, *step, False, False, False, v_max, slow) == v_max
-    assert pass_speed(1.5, 1.0, *step, False, False, False, v_max, slow) == v_max
-    # ...and once begun, drive it through
-    assert pass_speed(1.0, 1.05, *step, False, False, True, v_max, slow) == v_max
+    assert not arc_may_begin(1.09, *step)
+    assert arc_may_begin(1.1, *step) and arc_may_begin(1.5, *step)
+    # half the arc's duration early, so its middle falls on the team's
+    assert not arc_may_begin(1.04, *step, lead=0.05)
+    assert arc_may_begin(1.05, *step, lead=0.05)
     # across the 2 pi seam (a step from 6.2 to 0.1, middle 6.2 + 0.0916)
     seam = (6.2, 0.1)
-    assert pass_speed(6.25, 6.2, *seam, False, False, False, v_max, slow) == 0.0
-    assert pass_speed(0.01, 6.2, *seam, False, False, False, v_max, slow) == v_max
-    assert pass_speed(6.0, 0.05, *seam, True, False, False, v_max, slow) == v_max
+    assert not arc_may_begin(6.25, *seam) and arc_may_begin(0.01, *seam)
 
 
-@given(st.floats(0.0, 2 * math.pi - 1e-9), st.floats(0.01, 0.5), st.floats(-3.0, 3.0))
-def test_pass_speed_is_zero_or_a_speed_of_the_robot(level, step, lead):
-    v = pass_speed(wrap_2pi(level + lead), level, level, wrap_2pi(level + step), False,
-                   False, False, 0.5, 0.1)
-    assert v in (0.0, 0.5)
-    assert (v == 0.5) == (wrap_pi(lead - 0.5 * step) >= 0.0)
+@given(st.floats(0.0, 2 * math.pi - 1e-9), st.floats(0.01, 0.5), st.floats(-3.0, 3.0),
+       st.floats(0.0, 0.2))
+def test_arc_may_begin_exactly_past_the_middle_less_the_lead(level, step, offset, lead):
+    go = arc_may_begin(wrap_2pi(level + offset), level, wrap_2pi(level + step), lead)
+    assert go == (wrap_pi(offset - (0.5 * step - lead)) >= 0.0)
+
+
+def test_a_leg_is_paced_to_end_when_its_arc_is_due():
+    v_max, slow, floor = 0.5, 0.1, 0.025
+    # 1 m to go at speed in 4 s: 0.25 m/s
+    assert leg_speed(4.0, 1.0, 0.0, False, v_max, slow, floor) == pytest.approx(0.25)
+    # 0.2 m of it to measure at 0.1 m/s takes 2 s: the rest in the 2 s left
+    assert leg_speed(4.0, 0.8, 0.2, False, v_max, slow, floor) == pytest.approx(0.4)
+    # late, or out of time: as fast as it may, and never above the measuring speed there
+    assert leg_speed(-1.0, 1.0, 0.0, False, v_max, slow, floor) == v_max
+    assert leg_speed(1.0, 1.0, 0.5, False, v_max, slow, floor) == v_max
+    assert leg_speed(4.0, 1.0, 0.0, True, v_max, slow, floor) == slow
+    # far too early: the floor, not a stop (the arc waits instead)
+    assert leg_speed(1000.0, 0.1, 0.0, False, v_max, slow, floor) == floor
+
+
+@given(st.floats(-100, 100), st.floats(0, 10), st.floats(0, 10), st.booleans())
+def test_leg_speed_stays_within_the_robot_and_the_measuring_limits(left, fast, slow_m, measuring):
+    v = leg_speed(left, fast, slow_m, measuring, 0.5, 0.1, 0.025)
+    assert 0.025 <= v <= 0.5
+    if measuring:
+        assert v <= 0.1
 
 
 def test_limit_lead():

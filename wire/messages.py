@@ -140,6 +140,10 @@ class Cmd:
         _require(abs(self.v) <= 10.0 and abs(self.omega) <= 100.0, "command out of range")
 
 
+MAX_CYCLE_S = 1e5  # no team cycle (or pass) is longer: a day
+MAX_PASSES = 10_000
+
+
 @dataclass(frozen=True)
 class AgentState:
     """What agent ``robot`` tells its neighbours after tick ``k``: its segment
@@ -167,9 +171,26 @@ class AgentState:
     # ends: a neighbour uses them for bins it has not measured itself.
     end_bins: list[int] = field(default_factory=list)
     end_depths: list[float] = field(default_factory=list)
+    # The team's decision it follows (agent.team): the common cycle, s, and the passes
+    # per sweep; 0 for none yet. A robot takes its lower neighbour's.
+    cycle_s: float = 0.0
+    passes: int = 0
+    # Chain maxima of every robot's pass need (s) and segment length (m), over the
+    # robots at or below the sender and at or above it; 0 for none yet.
+    need_below: float = 0.0
+    need_above: float = 0.0
+    span_below: float = 0.0
+    span_above: float = 0.0
 
     def check(self) -> None:
         _require(self.t >= 0 and self.k >= 0 and self.robot >= 0, "negative t, k or robot")
+        _require(0.0 <= self.cycle_s <= MAX_CYCLE_S, "cycle_s outside [0, 1e5] s")
+        _require(0 <= self.passes <= MAX_PASSES, "passes outside [0, 10000]")
+        _require(0.0 <= self.need_below <= MAX_CYCLE_S and 0.0 <= self.need_above <= MAX_CYCLE_S,
+                 "pass need outside [0, 1e5] s")
+        span = self.edge_hi - self.edge_lo
+        _require(0.0 <= self.span_below <= span and 0.0 <= self.span_above <= span,
+                 "segment span outside [0, the edge's length]")
         _require(self.dropped >= 0, "negative dropped count")
         _require(len(self.end_bins) == len(self.end_depths),
                  "end_bins and end_depths must be as long as each other")

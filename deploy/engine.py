@@ -1,0 +1,101 @@
+"""The in-process engine: a whole team in one process, for sweeping many cases fast.
+
+The world core (``simworld.world.World``) and one ``agent.controller.Controller`` per
+robot, stepped in lockstep the way the bus runs them: at tick k every agent gets its
+robot's sensing and pose (the simulator's truth, or its dead reckoning with
+``localization="odometry"``) and its neighbours' states of tick k-1, then the world
+steps with every command. It is the run ``btrack sim`` makes with the same case, seed
+and pose source, bit for bit (a test compares the tracks); only the bus's timeouts
+under load could make a bus run differ. No processes, no bus, no clock: a 3-robot
+1200 s case takes about a second.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from agent import config as agent_config
+from agent.controller import Controller, Neighbour, initial_segment
+from simworld.maps import GridMap, load_map
+from simworld.world import ODOM_NOISE, World
+
+DT_S = 0.1  # the world's tick at 10 Hz control
+BIN_M = 0.1  # the report's depth bins (the world's WorldInfo default)
+
+
+@dataclass(frozen=True)
+class EngineCase:
+    """One simulated team: the same settings as ``btrack sim``'s."""
+
+    map: str
+    robots: int = 3
+    start: str = "in-phase"
+    duration_s: float = 1200.0
+    seed: int = 1
+    overrides: dict[str, dict[str, Any]] = field(default_factory=dict)
+    localization: str = "truth"  # or "odometry": the agents steer by dead reckoning
+    odom_noise: float = ODOM_NOISE
+    odom_turn_noise: float | None = None  # None: as odom_noise (the world's default)
+    scale: float = 0.05  # metres per pixel of a PNG map
+
+
+@dataclass
+class Tracks:
+    """Every robot's true track and what its agent published, per tick: arrays of
+    shape (robots, ticks)."""
+
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    direction: np.ndarray
+    phase: np.ndarray  # the phase the agent computed (eq. 3.1 from its own pose)
+    workload: np.ndarray  # the workload the agent believed
+    cycle_s: np.ndarray  # the team cycle the agent used
+
+
+def run(case: EngineCase, gmap: GridMap | None = None) -> tuple[GridMap, Tracks]:
+    """Run one case in lockstep; the map and every robot's tracks."""
+    if case.localization not in ("truth", "odometry"):
+        raise ValueError(f"the in-process engine takes truth or odometry poses, not "
+                         f"{case.localization!r}")
+    gains, patrol, limits = agent_config.load(None, case.overrides)
+    gmap = gmap or load_map(case.map, case.scale, seed=case.seed)
+    n = case.robots
+    world = World(gmap, n, case.start, seed=case.seed, odom_noise=case.odom_noise,
+                  odom_turn_noise=case.odom_turn_noise)
+    odometry = case.localization == "odometry"
+    lo_e, hi_e = gmap.edge_lo, gmap.edge_hi
+    ticks = int(round(case.duration_s / DT_S))
+    arrays = [np.zeros((n, ticks)) for _ in range(8)]
+    x, y, lo, hi, direction, seen_phase, seen_work, cycle = arrays
+    controllers: list[Controller] = []
+    published: list[Neighbour | None] = [None] * n  # each agent's state of tick k-1
+    for k in range(ticks):
+        cmds, now = {}, []
+        for i in range(n):
+            reading = world.sense(i)
+            px, py, pth = world.odometry_pose(i) if odometry else world.truth(i)
+            if k == 0:
+                seg = initial_segment(i, n, lo_e, hi_e)
+                controllers.append(Controller(i, *seg, lo_e, hi_e, px, gains, patrol, limits))
+            out = controllers[i].step(
+                DT_S, px, py, pth, reading.ice, reading.algae,
+                published[i - 1] if i > 0 else None,
+                published[i + 1] if i + 1 < n else None,
+                i > 0, i + 1 < n,
+            )
+            now.append(controllers[i].published)  # what agent i puts on the bus
+            cmds[i] = (out.v, out.omega)
+            x[i, k], y[i, k] = world.truth(i)[:2]
+            lo[i, k], hi[i, k], direction[i, k] = out.lo, out.hi, out.direction
+            seen_phase[i, k], seen_work[i, k] = out.phase, out.workload
+            cycle[i, k] = out.cycle_s
+        published = list(now)
+        world.step(cmds, DT_S)
+    t = np.arange(ticks) * DT_S
+    return gmap, Tracks(t, x, y, lo, hi, direction, seen_phase, seen_work, cycle)
