@@ -11,36 +11,51 @@ from typing import Any
 
 from report.load import LoadError, load_run
 from report.localization import localization_errors, summary_stats
-from report.measures import steady_state
+from report.measures import WORKLOAD_REL_BAND
 from report.series import error_series, time_grid
 from report.summary import (
     CONVERGE_SMOOTH_S,
     PHASE_BAND_RAD,
     WORKLOAD_BAND_M2,
     compute_summary,
+    goals_met,
     json_safe,
     revisit,
     write_summary,
 )
 
 ROWS = (
-    ("phase_sse_rad", "phase steady-state error, position-based (rad)"),
-    ("phase_sse_path_rad", "phase steady-state error, path length (rad)"),
-    ("phase_max_rad", "phase error, max over last quarter (rad)"),
+    ("phase_sse_rad", "phase steady-state error, position-based, eq. 3.1 (rad)"),
+    ("phase_max_rad", "phase error, position-based, max over last quarter (rad)"),
+    ("phase_path_sse_rad", "phase steady-state error, path length (rad)"),
+    ("phase_path_max_rad", "phase error, path length, max over last quarter (rad)"),
     ("workload_sse_m2", "workload steady-state error (m^2)"),
     ("workload_max_m2", "workload error, max over last quarter (m^2)"),
+    ("workload_mean_m2", "mean workload per robot, edge's true workload / n (m^2)"),
+    ("workload_rel_sse", "workload steady-state error / mean workload"),
+    ("workload_rel_max", "workload error, max over last quarter / mean workload"),
     ("phase_sse_agents_rad", "phase steady-state error as the agents see it (rad)"),
+    ("phase_max_agents_rad", "phase error as the agents see it, max over last quarter (rad)"),
     ("workload_sse_agents_m2", "workload steady-state error as the agents see it (m^2)"),
+    ("workload_max_agents_m2",
+     "workload error as the agents see it, max over last quarter (m^2)"),
+    ("workload_rel_sse_agents",
+     "workload steady-state error as the agents see it / mean workload"),
     ("phase_q1_rad", "phase error, mean first quarter (rad)"),
     ("phase_q4_rad", "phase error, mean last quarter (rad)"),
     ("workload_q1_m2", "workload error, mean first quarter (m^2)"),
     ("workload_q4_m2", "workload error, mean last quarter (m^2)"),
     ("phase_converge_s", "phase converged after (s)"),
-    ("workload_converge_s", "workload converged after (s)"),
-    ("converge_s", "converged after (s)"),
-    ("revisit_mean_s", "revisit time, mean (s)"),
+    ("workload_converge_s", "workload converged after, absolute band (s)"),
+    ("workload_rel_converge_s", "workload converged after, relative band (s)"),
+    ("converge_s", "converged after, phase and absolute workload (s)"),
+    ("revisit_mean_s", "revisit time (idleness), mean (s)"),
+    ("revisit_std_s", "revisit time, standard deviation (s)"),
     ("revisit_worst_s", "revisit time, worst (s)"),
-    ("revisit_ideal_s", "revisit time, ideal (s)"),
+    ("revisit_optimum_s", "revisit time, worst of the optimal partition, 2 L / (n v) (s)"),
+    ("revisit_worst_ratio", "revisit time, worst / partition optimum"),
+    ("revisit_ideal_s", "revisit time, ideal mean, L / (n v) (s)"),
+    ("still_frac_max", "standing still, largest fraction of the last quarter of a robot"),
     ("speedup", "speed-up (simulated / wall time)"),
     ("loc_error_mean_m", "localisation error of the agents' poses, mean (m)"),
     ("loc_error_p95_m", "localisation error of the agents' poses, 95th percentile (m)"),
@@ -93,13 +108,19 @@ def report_markdown(
     lines += [f"| {label} | {_fmt(value)} |" for label, value in (extra or {}).items()]
     lines += [
         "",
-        f"Steady state: last quarter of the run; convergence bands {phase_band} rad and "
-        f"{workload_band} m^2 (max over pairs, averaged over the trailing "
-        f"{CONVERGE_SMOOTH_S:g} s); revisit over the second half, one visit per robot "
-        "sweep; workload error from the true patrol depth. 'As the agents see it': from the "
-        "phases and workloads the agents published, each from its own pose estimate "
-        "(how the thesis measured its robot runs, table 7.3).",
+        f"Steady state: mean and max of |e| over neighbour pairs and the last quarter of "
+        f"the run; convergence bands {phase_band} rad, {workload_band} m^2 and "
+        f"{100 * WORKLOAD_REL_BAND:g} % of the mean workload (max over pairs, averaged "
+        f"over the trailing {CONVERGE_SMOOTH_S:g} s); workload error from the true patrol "
+        "depth. Revisit times over the second half: for points every 0.1 m along the "
+        "edge, the times between visits (crossings of the local edge within a robot's "
+        "radius, one per robot sweep), against the optimum of a partitioned patrol, "
+        "whose worst is 2 L / (n v) with n v the team's measured along-edge sweep rate. "
+        "Standing still: moving less than 1 mm per 0.1 s tick. 'As the agents see it': "
+        "from the phases and workloads the agents published, each from its own pose "
+        "estimate (how the thesis measured its robot runs, table 7.3).",
         "",
+        *goals_markdown(summary),
         *_positions_note(summary.get("positions_from")),
         "![errors](errors.png)",
         "",
@@ -118,6 +139,20 @@ def report_markdown(
         "",
     ]
     return "\n".join(lines)
+
+
+def goals_markdown(summary: dict[str, Any]) -> list[str]:
+    """The goals table (``summary.GOALS``): each measure against its bound, met or not,
+    and a line naming those not met."""
+    lines = ["## Goals", "", "| goal | value | met |", "| --- | --- | --- |"]
+    missed = []
+    for key, label, value, bound, met in goals_met(summary):
+        verdict = "met" if met else "not met" if met is not None else "not measured"
+        if not met:
+            missed.append(f"{label} ({verdict})")
+        lines.append(f"| {label} < {bound:g} (`{key}`) | {_fmt(value)} | {verdict} |")
+    lines += ["", ("Not met: " + "; ".join(missed) + ".") if missed else "All goals met.", ""]
+    return lines
 
 
 def faults_markdown(faults: list[dict[str, Any]]) -> str:
@@ -176,11 +211,7 @@ def make_report(
     boundaries_figure(run, run_dir / "boundaries.png")
     revisit_figure(rev, run_dir / "revisit.png")
     localization_figure(loc, run_dir / "localization.png", summary.get("localization"))
-    _, agents_max = steady_state(series.t, series.workload_agents)
-    extra = {
-        "workload error as the agents see it, max over last quarter (m^2)":
-            json_safe(agents_max),
-    }
+    extra: dict[str, Any] = {}
     for rid in sorted(loc.t):
         for which, label in (("pf", "poses given"), ("odometry", "odometry alone")):
             errors = getattr(loc, which).get(rid)

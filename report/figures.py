@@ -13,12 +13,12 @@ matplotlib.use("Agg")
 
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from matplotlib.patches import Patch, Rectangle  # noqa: E402
+from matplotlib.patches import Patch  # noqa: E402
 
 from report.load import RunData  # noqa: E402
 from report.localization import LocErrors  # noqa: E402
 from report.measures import hold  # noqa: E402
-from report.series import ErrorSeries, live_matrix, time_grid  # noqa: E402
+from report.series import NO_EDGE, ErrorSeries, edge_model, live_matrix, time_grid  # noqa: E402
 from report.summary import Revisit  # noqa: E402
 
 WATER = "#3a7dc9"
@@ -80,30 +80,54 @@ def errors_figure(series: ErrorSeries, path: str | Path, run: RunData | None = N
     plt.close(fig)
 
 
+def edge_outline(run: RunData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What the map draws of the edge, from WorldInfo: the bins' sides (x, m), the local
+    edge's y per bin (0 for recordings without the edge's shape) and the true patrol
+    depth per bin, drawn above the local edge; no bins without a depth profile."""
+    edge = edge_model(run)
+    if edge is None or not len(edge.patrol_depth):
+        return np.empty(0), np.empty(0), np.empty(0)
+    depth = np.asarray(edge.patrol_depth, dtype=float)
+    # WorldInfo's check keeps edge_y one per depth bin
+    edge_y = np.asarray(edge.edge_y, dtype=float) if len(edge.edge_y) else np.zeros(depth.size)
+    sides = np.minimum(edge.edge_lo + edge.bin_m * np.arange(depth.size + 1), edge.edge_hi)
+    return sides, edge_y, depth
+
+
 def map_figure(run: RunData, path: str | Path) -> None:
-    """Top-down map: water (y < 0), ice, the algae band and patrol depth, robot tracks."""
+    """Top-down map: water below the local edge, ice above it, the algae band and the
+    true patrol depth above the local edge, robot tracks."""
     info = run.info
     fig, ax = plt.subplots(figsize=(10, 6))
     edge_lo, edge_hi = run.edge or (0.0, 1.0)
-    bin_m = float(info.get("bin_m") or 0.1)
-    depth = np.asarray(info.get("patrol_depth") or [], dtype=float)
+    edge = edge_model(run) or NO_EDGE
+    sides, edge_y, depth = edge_outline(run)
+    depth_top = edge_y + depth
     min_depth = float(info.get("min_depth", 0.0))
     tracks = run.positions
     xs = [tr.x for tr in tracks.values()]
     ys = [tr.y for tr in tracks.values()]
     all_x = np.concatenate(xs + [np.array([edge_lo, edge_hi])])
-    all_y = np.concatenate(ys + [np.array([-1.0, depth.max() if depth.size else 1.0])])
+    all_y = np.concatenate(ys + [np.array([-1.0, 1.0]), edge_y, depth_top])
     x0, x1 = float(all_x.min()) - 0.5, float(all_x.max()) + 0.5
     y0, y1 = float(all_y.min()) - 0.5, float(all_y.max()) + 0.5
-    ax.add_patch(Rectangle((x0, y0), x1 - x0, -y0, color=WATER, alpha=0.35, lw=0))
-    ax.add_patch(Rectangle((x0, 0.0), x1 - x0, y1, facecolor=ICE, edgecolor="none"))
-    if depth.size:
-        left = edge_lo + bin_m * np.arange(depth.size)
+    # water below the local edge, ice above it (the edge held flat past its ends)
+    fine_x = np.linspace(x0, x1, 20 * max(edge_y.size, 10) + 1)
+    fine_edge = edge.local_edge(fine_x) if np.isfinite(edge.edge_lo) else np.zeros_like(fine_x)
+    ax.fill_between(fine_x, y0, fine_edge, color=WATER, alpha=0.35, lw=0)
+    ax.fill_between(fine_x, fine_edge, y1, facecolor=ICE, edgecolor="none")
+    if edge_y.size:
         algae = np.where(depth > min_depth, depth, 0.0)
-        ax.bar(left, algae, width=bin_m, align="edge", bottom=0.0, color=ALGAE, alpha=0.6, lw=0)
-        edges = np.append(left, left[-1] + bin_m)
-        ax.stairs(depth, edges, color="darkgreen", lw=1.2, label="patrol depth")
-    ax.plot([edge_lo, edge_hi], [0.0, 0.0], color="black", lw=1.5, label="edge")
+        ax.bar(sides[:-1], algae, width=np.diff(sides), align="edge", bottom=edge_y,
+               color=ALGAE, alpha=0.6, lw=0)
+        ax.stairs(depth_top, sides, baseline=None, color="darkgreen", lw=1.2,
+                  label="patrol depth above the local edge")
+        centres = 0.5 * (sides[:-1] + sides[1:])
+        ax.plot(np.concatenate([[sides[0]], centres, [sides[-1]]]),
+                np.concatenate([[edge_y[0]], edge_y, [edge_y[-1]]]),
+                color="black", lw=1.5, label="edge")
+    else:
+        ax.plot([edge_lo, edge_hi], [0.0, 0.0], color="black", lw=1.5, label="edge")
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for j, (robot, tr) in enumerate(sorted(tracks.items())):
         c = colours[j % len(colours)]
@@ -180,7 +204,8 @@ def boundaries_figure(run: RunData, path: str | Path) -> None:
 
 def revisit_figure(rev: Revisit | None, path: str | Path) -> None:
     """Mean and worst time between visits of points every 0.1 m along the edge, over
-    the second half of the run, against the ideal for the same team speed."""
+    the second half of the run, against the ideal mean and the partition optimum of the
+    worst for the same team speed."""
     fig, ax = plt.subplots(figsize=(10, 4))
     if rev is not None:
         mean, worst = rev.profile()
@@ -188,11 +213,14 @@ def revisit_figure(rev: Revisit | None, path: str | Path) -> None:
         ax.plot(rev.points, mean, color="tab:blue", lw=1.2, marker=".", label="mean")
         if np.isfinite(rev.ideal_s):
             ax.axhline(rev.ideal_s, color="black", ls="--", lw=1.0,
-                       label=f"ideal for this team speed ({rev.ideal_s:.0f} s)")
-        ax.set_ylim(0, 1.25 * max(float(np.nanmax(worst)), rev.ideal_s))
+                       label=f"ideal mean for this team speed, L / (n v) ({rev.ideal_s:.0f} s)")
+            ax.axhline(rev.optimum_s, color="tab:red", ls="--", lw=1.0,
+                       label=f"partition optimum of the worst, 2 L / (n v) "
+                             f"({rev.optimum_s:.0f} s)")
+        ax.set_ylim(0, 1.25 * float(np.nanmax([*worst, rev.optimum_s, 1.0])))
         ax.set_title(f"Revisit time along the edge, {rev.t_from:.0f} s to {rev.t_to:.0f} s "
                      "(one visit per robot sweep)")
-        ax.legend(loc="upper right", fontsize=8, ncol=3)
+        ax.legend(loc="upper right", fontsize=8, ncol=2)
     else:
         ax.set_title("Revisit time along the edge: no tracks recorded")
     ax.set_xlabel("position along the edge (m)")

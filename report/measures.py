@@ -2,17 +2,80 @@
 
 Phase (thesis eq. 3.1, with the case condition read as the direction of travel),
 phase and workload errors per neighbour pair (eq. 3.2, 3.3), steady-state error,
-time to converge, revisit time along the edge, speed-up. No I/O, no clock.
+time to converge, revisit time (idleness) along the edge against the partition
+optimum, standing still, speed-up. No I/O, no clock. ``team_measures`` gives all of
+them for a team's arrays on one time grid, with or without a recording.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
 
 TWO_PI = 2.0 * math.pi
+
+# The report's bands and grids (``btrack report`` can override the two bands).
+PHASE_BAND_RAD = 0.15  # phase converged: max-over-pairs |e_phi| within this
+WORKLOAD_BAND_M2 = 0.05  # workload converged: max-over-pairs |e_Psi| within this
+# workload converged, relative: |e_Psi| within this fraction of the mean workload per
+# robot (the absolute band above is sized for the thesis's 6 m edge and three robots)
+WORKLOAD_REL_BAND = 0.005
+CONVERGE_SMOOTH_S = 10.0  # converge on |e| averaged over about two patrol passes
+STEADY_LAST = 0.25  # steady state: the last quarter of the run
+REVISIT_FROM = 0.5  # revisit times over the second half of the run (several patrol cycles)
+VISIT_MERGE_S = 1.0  # visits of a point closer than this count as one
+POINT_STEP_M = 0.1  # revisit times of points this far apart along the edge
+# below this speed a robot stands still: 1 mm per 0.1 s tick (odometry noise and
+# the controller's creep are far above it, a stopped robot far below)
+STILL_SPEED_M_S = 0.01
+
+
+@dataclass(frozen=True)
+class EdgeModel:
+    """The edge as the measures see it (WorldInfo's fields): its ends, the true patrol
+    depth and the local edge's y per bin of ``bin_m`` from ``edge_lo``. ``edge_y``
+    empty: a straight edge at y = 0 (every recording made before WorldInfo had it)."""
+
+    edge_lo: float
+    edge_hi: float
+    bin_m: float
+    patrol_depth: Sequence[float]
+    edge_y: Sequence[float] = ()  # () = straight at y 0
+    robot_radius: float = 0.17
+
+    @property
+    def length(self) -> float:
+        """Length of the edge along x, m (what the robots' along-edge speed covers)."""
+        return self.edge_hi - self.edge_lo
+
+    def bin_centres(self, bins: int) -> np.ndarray:
+        """x of the centres of the first ``bins`` bins, the last one clipped at edge_hi."""
+        left = self.edge_lo + self.bin_m * np.arange(bins)
+        return 0.5 * (left + np.minimum(left + self.bin_m, self.edge_hi))
+
+    def local_edge(self, x: np.ndarray | float) -> np.ndarray:
+        """The local edge's y at ``x``: linear between the bins' centres, the first and
+        last bin's value beyond them; 0 for a straight edge. NaN where x is NaN."""
+        x = np.asarray(x, dtype=float)
+        if len(self.edge_y) == 0:
+            return np.zeros(x.shape)
+        ys = np.asarray(self.edge_y, dtype=float)
+        return np.interp(x, self.bin_centres(ys.size), ys)
+
+    def workload(self, lo: np.ndarray | float, hi: np.ndarray | float) -> np.ndarray:
+        """True workload of segments [lo, hi] (``true_workload``); NaN without a depth
+        profile (a recording with no world)."""
+        if len(self.patrol_depth) == 0:
+            return np.full(np.broadcast(np.asarray(lo), np.asarray(hi)).shape, np.nan)
+        return true_workload(lo, hi, self.edge_lo, self.bin_m, self.patrol_depth)
+
+    @property
+    def total_workload(self) -> float:
+        """True workload of the whole edge, m^2; NaN without a depth profile."""
+        return float(self.workload(self.edge_lo, self.edge_hi))
 
 
 def wrap_pi(angle: np.ndarray | float) -> np.ndarray:
@@ -66,6 +129,24 @@ def neighbour_pairs(ids: Sequence[int]) -> list[tuple[int, int]]:
     """Neighbour pairs (i, i+1) of a chain: consecutive robot ids."""
     ids = sorted(ids)
     return list(zip(ids[:-1], ids[1:], strict=False))
+
+
+def active_pairs(ids: Sequence[int], live: np.ndarray
+                 ) -> tuple[list[tuple[int, int]], np.ndarray]:
+    """Neighbour pairs of a chain over time (``live[j, k]``: robot ``ids[j]`` in the
+    team at sample k): (a, b) is a pair while both are live and no live id lies between
+    them (a robot that left makes its two neighbours a pair). Returns the pairs that
+    ever occur and active[p, k]."""
+    pairs, rows = [], []
+    for ja in range(len(ids)):
+        between = np.zeros(live.shape[1], dtype=bool)
+        for jb in range(ja + 1, len(ids)):
+            active = live[ja] & live[jb] & ~between
+            if active.any():
+                pairs.append((ids[ja], ids[jb]))
+                rows.append(active)
+            between |= live[jb]
+    return pairs, np.array(rows, dtype=bool).reshape(len(rows), live.shape[1])
 
 
 def pair_errors(
@@ -242,16 +323,42 @@ def _band_time(t: np.ndarray, errors: np.ndarray, band: float, smooth_s: float,
     return float(t[back[0]] - t[0]) if back.size else math.nan
 
 
-def crossings(t: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Times and x positions where a track crosses the edge line y = 0 (interpolated)."""
+def crossings(
+    t: np.ndarray, x: np.ndarray, y: np.ndarray, edge: EdgeModel | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Times and x positions where a track crosses the local edge: sample pairs where
+    h = y - edge_y(x) changes sign, the crossing where h, linear between the two
+    samples, is zero. edge_y from ``edge.local_edge`` (linear between the bins'
+    centres); without ``edge``, or for a straight one, the line y = 0. Pairs with a
+    sample of unknown position (NaN) are skipped."""
     t, x, y = (np.asarray(v, dtype=float) for v in (t, x, y))
     if t.size < 2:
         return np.empty(0), np.empty(0)
-    side = y >= 0
-    k = np.flatnonzero(side[:-1] != side[1:])
-    y0, y1 = y[k], y[k + 1]
-    frac = np.where(y1 != y0, y0 / (y0 - y1), 0.0)
+    h = y if edge is None else y - edge.local_edge(x)
+    known = np.isfinite(h)
+    side = h >= 0
+    k = np.flatnonzero((side[:-1] != side[1:]) & known[:-1] & known[1:])
+    h0, h1 = h[k], h[k + 1]
+    frac = np.where(h1 != h0, h0 / (h0 - h1), 0.0)
     return t[k] + frac * (t[k + 1] - t[k]), x[k] + frac * (x[k + 1] - x[k])
+
+
+def sweep_index(t: np.ndarray, direction: np.ndarray, at_t: np.ndarray) -> np.ndarray:
+    """Which sweep of a robot (how many times its ``direction``, sampled at sorted
+    ``t``, had reversed by then) each of ``at_t`` falls in. Samples with no direction
+    (NaN) hold the one before; 0 before the first sample or with none."""
+    t = np.asarray(t, dtype=float)
+    at_t = np.asarray(at_t, dtype=float)
+    direction = np.asarray(direction, dtype=float)
+    if t.size == 0:
+        return np.zeros(at_t.size, dtype=np.int64)
+    known = np.isfinite(direction)
+    last_known = np.maximum.accumulate(np.where(known, np.arange(t.size), 0))
+    held = direction[last_known]
+    reversal = (held[1:] != held[:-1]) & np.isfinite(held[1:]) & np.isfinite(held[:-1])
+    reversals = np.concatenate([[0], np.cumsum(reversal)])
+    idx = np.clip(np.searchsorted(t, at_t, side="right") - 1, 0, t.size - 1)
+    return reversals[idx].astype(np.int64)
 
 
 def merge_visits(times: np.ndarray, merge_s: float) -> np.ndarray:
@@ -326,10 +433,22 @@ def pooled_revisit(
     gaps: Sequence[np.ndarray | None], t_from: float, t_to: float
 ) -> tuple[float, float]:
     """Mean over every interval of every point, and the worst point's worst."""
+    mean, _, worst = idleness(gaps, t_from, t_to)
+    return mean, worst
+
+
+def idleness(
+    gaps: Sequence[np.ndarray | None], t_from: float, t_to: float
+) -> tuple[float, float, float]:
+    """Idleness as patrol benchmarks report it: over every point and every interval
+    between its consecutive visits in [t_from, t_to] (``point_gaps``), the mean and the
+    standard deviation of the intervals, and the worst (the worst point's worst; a
+    point seen fewer than twice counts the whole window)."""
     known = [g for g in gaps if g is not None]
     pooled = np.concatenate(known) if known else np.empty(0)
     _, worst = revisit_profile(gaps, t_from, t_to)
-    return nanmean(pooled), nanmax(worst)
+    std = float(pooled.std()) if pooled.size else math.nan
+    return nanmean(pooled), std, nanmax(worst)
 
 
 def edge_points(edge_lo: float, edge_hi: float, step: float = 0.1) -> np.ndarray:
@@ -352,15 +471,113 @@ def sweep_rate(
         x = np.asarray(x, dtype=float)
         sel = (t >= t_from) & (t <= t_to)
         if sel.sum() >= 2:
-            total += float(np.abs(np.diff(x[sel])).sum())
+            step = np.diff(x[sel])
+            total += float(np.abs(step[np.isfinite(step)]).sum())
     return total / duration
 
 
 def ideal_revisit(edge_length: float, team_sweep_rate: float) -> float:
-    """Revisit time of an ideal team with the same along-edge speed: L / sweep rate."""
+    """Mean revisit time of an ideal team with the same along-edge speed: L / sweep
+    rate (every point of the edge swept once per L / (n v) on average)."""
     if not team_sweep_rate > 0:
         return math.nan
     return edge_length / team_sweep_rate
+
+
+def partition_optimum(edge_length: float, team_sweep_rate: float, closed: bool = False
+                      ) -> float:
+    """Worst idleness of the optimal partitioned patrol: n robots each sweeping back and
+    forth over an equal share of an open edge of length L at along-edge speed v leave
+    the ends of their shares unvisited for 2 L / (n v); on a closed edge (a ring, every
+    robot going round the same way) L / (n v). n v is the team's measured along-edge
+    sweep rate (``sweep_rate``)."""
+    if not team_sweep_rate > 0:
+        return math.nan
+    return (1.0 if closed else 2.0) * edge_length / team_sweep_rate
+
+
+def revisit_window(t: np.ndarray) -> tuple[float, float]:
+    """The window of the revisit measures: the second half of the run."""
+    t = np.asarray(t, dtype=float)
+    return float(t[0] + REVISIT_FROM * (t[-1] - t[0])), float(t[-1])
+
+
+def visit_gaps(
+    tracks: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
+    edge: EdgeModel,
+    t_from: float,
+    t_to: float,
+) -> tuple[np.ndarray, list[np.ndarray | None]]:
+    """Points every POINT_STEP_M along the edge and, for each, the times between its
+    consecutive visits in [t_from, t_to] (``point_gaps``): a visit is a crossing of the
+    local edge (``crossings``) within the robot radius of the point, one per robot
+    sweep. ``tracks``: per robot, its track's t, x, y and the times and directions
+    that tell its sweeps apart (``sweep_index``)."""
+    visit_t, visit_x, visit_group = [np.empty(0)], [np.empty(0)], [np.empty(0, np.int64)]
+    for j, (t, x, y, sweep_t, sweep_direction) in enumerate(tracks):
+        tc, xc = crossings(t, x, y, edge)
+        visit_t.append(tc)
+        visit_x.append(xc)
+        visit_group.append(j * 1_000_000 + sweep_index(sweep_t, sweep_direction, tc))
+    points = edge_points(edge.edge_lo, edge.edge_hi, POINT_STEP_M)
+    gaps = point_gaps(
+        points,
+        np.concatenate(visit_t),
+        np.concatenate(visit_x),
+        edge.robot_radius,
+        t_from,
+        t_to,
+        VISIT_MERGE_S,
+        np.concatenate(visit_group),
+    )
+    return points, gaps
+
+
+def idleness_measures(
+    gaps: Sequence[np.ndarray | None],
+    t_from: float,
+    t_to: float,
+    team_sweep_rate: float,
+    edge_length: float,
+    closed: bool = False,
+) -> dict[str, float]:
+    """The revisit keys of ``team_measures``: idleness mean, standard deviation and
+    worst (``idleness``), the ideal mean L / (n v) (``ideal_revisit``), the partition
+    optimum of the worst (``partition_optimum``) and the worst over that optimum."""
+    mean, std, worst = idleness(gaps, t_from, t_to)
+    optimum = partition_optimum(edge_length, team_sweep_rate, closed)
+    return {
+        "revisit_mean_s": mean,
+        "revisit_std_s": std,
+        "revisit_worst_s": worst,
+        "revisit_ideal_s": ideal_revisit(edge_length, team_sweep_rate),
+        "revisit_optimum_s": optimum,
+        "revisit_worst_ratio": worst / optimum if optimum > 0 else math.nan,
+    }
+
+
+def still_fraction(
+    t: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    t_from: float,
+    live: np.ndarray | None = None,
+) -> float:
+    """Standing still: the fraction of one robot's steps from ``t_from`` on (between
+    samples both known and, with ``live``, both live) in which it moved less than
+    STILL_SPEED_M_S times the step's duration (1 mm per 0.1 s tick). NaN with none."""
+    t, x, y = (np.asarray(v, dtype=float) for v in (t, x, y))
+    if t.size < 2:
+        return math.nan
+    dt = np.diff(t)
+    step = np.hypot(np.diff(x), np.diff(y))
+    ok = (t[:-1] >= t_from) & np.isfinite(step) & (dt > 0)
+    if live is not None:
+        live = np.asarray(live, dtype=bool)
+        ok &= live[:-1] & live[1:]
+    if not ok.any():
+        return math.nan
+    return float(np.mean(step[ok] < STILL_SPEED_M_S * dt[ok]))
 
 
 def speedup(tick_t: np.ndarray, tick_log_ns: np.ndarray) -> float:
@@ -372,3 +589,188 @@ def speedup(tick_t: np.ndarray, tick_log_ns: np.ndarray) -> float:
     wall = float(tick_log_ns.max() - tick_log_ns.min()) / 1e9
     sim = float(tick_t.max() - tick_t.min())
     return sim / wall if wall > 0 else math.nan
+
+
+# a team's measures ------------------------------------------------------------------
+@dataclass
+class TeamErrors:
+    """Error time series of a team on one time grid: per neighbour pair (rows) against
+    time (columns), NaN where the pair is not neighbours or a value is unknown."""
+
+    t: np.ndarray  # time of each sample, s
+    pairs: list[tuple[int, int]]  # neighbour pairs (ids of live robots next to each other)
+    phase: np.ndarray  # e_phi with the position-based phase (eq. 3.1), rad
+    phase_path: np.ndarray  # e_phi with the path-length phase, rad
+    workload: np.ndarray  # e_Psi with the true workload (true patrol depth), m^2
+    workload_agents: np.ndarray  # e_Psi from the workloads the agents published, m^2
+    # e_phi from the phases the agents published (each from its own pose estimate), rad:
+    # the errors as the robots see them, how the thesis measured its robot runs
+    phase_agents: np.ndarray
+    ids: list[int] = field(default_factory=list)  # the robots, in id order
+    live: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), dtype=bool))
+
+
+def _path_phase_of_known(x: np.ndarray, y: np.ndarray, direction: np.ndarray) -> np.ndarray:
+    """``path_length_phase`` over the samples with a known position and direction."""
+    known = np.isfinite(x) & np.isfinite(y) & np.isfinite(direction)
+    out = np.full(x.shape, np.nan)
+    out[known] = path_length_phase(x[known], y[known], direction[known])
+    return out
+
+
+def team_errors(
+    t: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    direction: np.ndarray,
+    seen_phase: np.ndarray,
+    seen_workload: np.ndarray,
+    edge: EdgeModel,
+    live: np.ndarray | None = None,
+    ids: Sequence[int] | None = None,
+    phase_path: np.ndarray | None = None,
+) -> TeamErrors:
+    """Phase and workload errors of neighbour pairs (``active_pairs`` on ``live``;
+    None: always live) from arrays of shape (robots, samples), robots in id order
+    (``ids``, default 0..n-1): position phase (eq. 3.1) from the true x, lo, hi and
+    direction; path-length phase from x, y and direction (or ``phase_path`` given per
+    robot); true workload from the edge's depth profile; and the phases and workloads
+    the agents published."""
+    x, y, lo, hi, direction, seen_phase, seen_workload = (
+        np.atleast_2d(np.asarray(v, dtype=float))
+        for v in (x, y, lo, hi, direction, seen_phase, seen_workload)
+    )
+    t = np.asarray(t, dtype=float)
+    n = x.shape[0]
+    robots = list(range(n)) if ids is None else list(ids)
+    alive = np.ones(x.shape, dtype=bool) if live is None else np.asarray(live, dtype=bool)
+    index_pairs, active = active_pairs(list(range(n)), alive)
+    if phase_path is None:
+        phase_path = np.vstack([_path_phase_of_known(x[j], y[j], direction[j])
+                                for j in range(n)]) if n else x.copy()
+
+    def errors(values: np.ndarray, wrap: bool) -> np.ndarray:
+        if not index_pairs:
+            return np.empty((0, t.size))
+        rows = {j: values[j] for j in range(n)}
+        return np.where(active, pair_errors(rows, index_pairs, wrap), np.nan)
+
+    return TeamErrors(
+        t=t,
+        pairs=[(robots[a], robots[b]) for a, b in index_pairs],
+        phase=errors(position_phase(x, lo, hi, direction), True),
+        phase_path=errors(np.asarray(phase_path, dtype=float), True),
+        workload=errors(edge.workload(lo, hi), False),
+        workload_agents=errors(seen_workload, False),
+        phase_agents=errors(seen_phase, True),
+        ids=robots,
+        live=alive,
+    )
+
+
+def mean_workload(t: np.ndarray, live: np.ndarray, total_workload: float,
+                  last: float = STEADY_LAST) -> float:
+    """Mean workload per robot over the last ``last`` of the run: the edge's total true
+    workload over the number of live robots, averaged over the samples."""
+    live = np.asarray(live, dtype=bool)
+    team = live.sum(axis=0) if live.size else np.zeros(np.asarray(t).size)
+    sel = window_mask(t, 1.0 - last, 1.0) & (team > 0)
+    if not sel.any():
+        return math.nan
+    return float(np.mean(total_workload / team[sel]))
+
+
+def error_measures(
+    errors: TeamErrors,
+    total_workload: float,
+    last: float = STEADY_LAST,
+    phase_band: float = PHASE_BAND_RAD,
+    workload_band: float = WORKLOAD_BAND_M2,
+    smooth_s: float = CONVERGE_SMOOTH_S,
+) -> dict[str, float]:
+    """The error keys of ``team_measures`` from a team's error series: steady state
+    (``steady_state``: mean and max of |e| over pairs and the last ``last``) of both
+    phases, of the true workload absolute and relative to the mean workload per robot,
+    and of the agents' own view; times to converge into the bands."""
+    t = errors.t
+    phase_sse, phase_max = steady_state(t, errors.phase, last)
+    path_sse, path_max = steady_state(t, errors.phase_path, last)
+    work_sse, work_max = steady_state(t, errors.workload, last)
+    agents_phase_sse, agents_phase_max = steady_state(t, errors.phase_agents, last)
+    agents_work_sse, agents_work_max = steady_state(t, errors.workload_agents, last)
+    mean = mean_workload(t, errors.live, total_workload, last)
+    phase_conv = converge_time(t, errors.phase, phase_band, smooth_s)
+    work_conv = converge_time(t, errors.workload, workload_band, smooth_s)
+    rel_conv = (converge_time(t, errors.workload, WORKLOAD_REL_BAND * mean, smooth_s)
+                if mean > 0 else math.nan)
+    later = (max(phase_conv, work_conv)
+             if math.isfinite(phase_conv) and math.isfinite(work_conv) else math.nan)
+
+    def relative(value: float) -> float:
+        return value / mean if mean > 0 else math.nan
+
+    return {
+        "phase_sse_rad": phase_sse,
+        "phase_max_rad": phase_max,
+        "phase_path_sse_rad": path_sse,
+        "phase_path_max_rad": path_max,
+        "workload_sse_m2": work_sse,
+        "workload_max_m2": work_max,
+        "workload_mean_m2": mean,
+        "workload_rel_sse": relative(work_sse),
+        "workload_rel_max": relative(work_max),
+        "phase_sse_agents_rad": agents_phase_sse,
+        "phase_max_agents_rad": agents_phase_max,
+        "workload_sse_agents_m2": agents_work_sse,
+        "workload_max_agents_m2": agents_work_max,
+        "workload_rel_sse_agents": relative(agents_work_sse),
+        "phase_converge_s": phase_conv,
+        "workload_converge_s": work_conv,
+        "workload_rel_converge_s": rel_conv,
+        "converge_s": later,
+    }
+
+
+def team_measures(
+    t: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    direction: np.ndarray,
+    seen_phase: np.ndarray,
+    seen_workload: np.ndarray,
+    edge: EdgeModel,
+    live: np.ndarray | None = None,
+    last: float = STEADY_LAST,
+) -> dict[str, float]:
+    """Every measure of a team's run, from arrays of shape (robots, ticks) on the time
+    grid ``t``, robots in id order, neighbours consecutive ids (a chain); ``live``
+    (bool, same shape) marks the ticks a robot was in the team (None: always). x, y:
+    true positions; lo, hi, direction: each robot's segment and direction of travel;
+    seen_phase, seen_workload: what the agents published. Errors and their steady
+    state over the last ``last`` of the run (``error_measures``), revisit times over
+    the second half (``idleness_measures``, visits of the local edge of ``edge``),
+    and ``still_frac_max``: the largest fraction of steady-state ticks a robot stood
+    still (``still_fraction``). A flat dict of floats, NaN where not measurable."""
+    t = np.asarray(t, dtype=float)
+    x, y, direction = (np.atleast_2d(np.asarray(v, dtype=float)) for v in (x, y, direction))
+    alive = np.ones(x.shape, dtype=bool) if live is None else np.asarray(live, dtype=bool)
+    errors = team_errors(t, x, y, lo, hi, direction, seen_phase, seen_workload, edge, alive)
+    out = error_measures(errors, edge.total_workload, last)
+    if t.size < 2:
+        nothing = idleness_measures([], math.nan, math.nan, math.nan, edge.length)
+        return {**out, **nothing, "still_frac_max": math.nan}
+    # a robot out of the team neither visits nor sweeps
+    x_live, y_live = np.where(alive, x, np.nan), np.where(alive, y, np.nan)
+    t_from, t_to = revisit_window(t)
+    tracks = [(t, x_live[j], y_live[j], t, direction[j]) for j in range(x.shape[0])]
+    _, gaps = visit_gaps(tracks, edge, t_from, t_to)
+    rate = sweep_rate([(t, x_live[j]) for j in range(x.shape[0])], t_from, t_to)
+    out.update(idleness_measures(gaps, t_from, t_to, rate, edge.length))
+    still_from = float(t[0] + (1.0 - last) * (t[-1] - t[0]))
+    still = [still_fraction(t, x[j], y[j], still_from, alive[j]) for j in range(x.shape[0])]
+    out["still_frac_max"] = nanmax(np.asarray(still))
+    return out

@@ -3,25 +3,35 @@ on one time grid (the ticks). Pure: arrays in, arrays out."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
 
 import numpy as np
 
 from report import measures as m
 from report.load import RunData
 
+# The error series of a recorded run: the same as an in-process run's (one
+# implementation, ``measures.team_errors``).
+ErrorSeries = m.TeamErrors
+active_pairs = m.active_pairs
+NO_EDGE = m.EdgeModel(math.nan, math.nan, 0.1, ())  # a recording with no edge at all
 
-@dataclass
-class ErrorSeries:
-    t: np.ndarray  # simulation time of each sample (the ticks), s
-    pairs: list[tuple[int, int]]  # neighbour pairs (live ids next to each other), a row each
-    phase: np.ndarray  # e_phi with the position-based phase (eq. 3.1), rad
-    phase_path: np.ndarray  # e_phi with the path-length phase, rad
-    workload: np.ndarray  # e_Psi with the true workload (true patrol depth), m^2
-    workload_agents: np.ndarray  # e_Psi from the workloads the agents published, m^2
-    # e_phi from the phases the agents published (each from its own pose estimate), rad:
-    # the errors as the robots see them, how the thesis measured its robot runs
-    phase_agents: np.ndarray
+
+def edge_model(run: RunData) -> m.EdgeModel | None:
+    """The edge of a recorded run as the measures see it: its ends (the world's, else
+    the agents'), and from WorldInfo the true patrol depth, the local edge's shape
+    (straight at y = 0 in recordings without one) and the robots' radius."""
+    if run.edge is None:
+        return None
+    info = run.info
+    return m.EdgeModel(
+        edge_lo=run.edge[0],
+        edge_hi=run.edge[1],
+        bin_m=float(info.get("bin_m") or 0.1),
+        patrol_depth=tuple(info.get("patrol_depth") or ()),
+        edge_y=tuple(info.get("edge_y") or ()),
+        robot_radius=float(info.get("robot_radius", 0.17)),
+    )
 
 
 def time_grid(run: RunData) -> np.ndarray:
@@ -55,72 +65,39 @@ def live_matrix(run: RunData, t: np.ndarray, ids: list[int]) -> np.ndarray:
     return live
 
 
-def active_pairs(ids: list[int], live: np.ndarray) -> tuple[list[tuple[int, int]], np.ndarray]:
-    """Neighbour pairs over time: (a, b) is a pair while both are live and no live id
-    lies between them (a robot that left makes its two neighbours a pair). Returns the
-    pairs that ever occur and active[p, k]."""
-    pairs, rows = [], []
-    for ja in range(len(ids)):
-        between = np.zeros(live.shape[1], dtype=bool)
-        for jb in range(ja + 1, len(ids)):
-            active = live[ja] & live[jb] & ~between
-            if active.any():
-                pairs.append((ids[ja], ids[jb]))
-                rows.append(active)
-            between |= live[jb]
-    return pairs, np.array(rows, dtype=bool).reshape(len(rows), live.shape[1])
-
-
 def error_series(run: RunData) -> ErrorSeries:
+    """Errors per neighbour pair on the ticks: each agent's published state and each
+    robot's track (truth, else (hardware) the agents' poses) held at every tick."""
     t = time_grid(run)
     age = max_age_s(run)
-    # every agent that published; positions from truth, else (hardware) the agents' poses
     tracks = run.positions
-    ids = sorted(run.states)
-    pairs, active = active_pairs(ids, live_matrix(run, t, ids))
-    depth = run.info.get("patrol_depth") or []
-    edge_lo = float(run.info.get("edge_lo", 0.0))
-    bin_m = float(run.info.get("bin_m") or 0.1)
-
-    phase: dict[int, np.ndarray] = {}
-    phase_path: dict[int, np.ndarray] = {}
-    work: dict[int, np.ndarray] = {}
-    work_agents: dict[int, np.ndarray] = {}
-    phase_agents: dict[int, np.ndarray] = {}
+    ids = sorted(run.states)  # every agent that published
     unknown = np.full(t.shape, np.nan)
+    rows: dict[str, list[np.ndarray]] = {
+        name: [] for name in ("x", "y", "lo", "hi", "direction", "phase", "workload", "path")
+    }
     for i in ids:
         st = run.states[i]
-        lo = m.hold(st.t, st.lo, t, age)
-        hi = m.hold(st.t, st.hi, t, age)
+        rows["lo"].append(m.hold(st.t, st.lo, t, age))
+        rows["hi"].append(m.hold(st.t, st.hi, t, age))
+        rows["direction"].append(m.hold(st.t, st.direction, t, age))
+        rows["phase"].append(m.hold(st.t, st.phase, t, age))
+        rows["workload"].append(m.hold(st.t, st.workload, t, age))
         tr = tracks.get(i)
         if tr is None:
-            phase[i] = phase_path[i] = unknown
+            rows["x"].append(unknown)
+            rows["y"].append(unknown)
+            rows["path"].append(unknown)
         else:
-            x = m.hold(tr.t, tr.x, t, age)
-            direction = m.hold(st.t, st.direction, t, age)
-            phase[i] = m.position_phase(x, lo, hi, direction)
+            rows["x"].append(m.hold(tr.t, tr.x, t, age))
+            rows["y"].append(m.hold(tr.t, tr.y, t, age))
+            # the path-length phase along the track as recorded, then held at the ticks
             dir_on_track = m.hold(st.t, st.direction, tr.t, age)
             along_path = m.path_length_phase(tr.x, tr.y, dir_on_track)
-            phase_path[i] = m.hold(tr.t, along_path, t, age)
-        work[i] = (
-            m.true_workload(lo, hi, edge_lo, bin_m, depth)
-            if len(depth)
-            else unknown
-        )
-        work_agents[i] = m.hold(st.t, st.workload, t, age)
-        phase_agents[i] = m.hold(st.t, st.phase, t, age)
-
-    def errors(values: dict[int, np.ndarray], wrap: bool) -> np.ndarray:
-        if not pairs:
-            return np.empty((0, t.size))
-        return np.where(active, m.pair_errors(values, pairs, wrap), np.nan)
-
-    return ErrorSeries(
-        t=t,
-        pairs=pairs,
-        phase=errors(phase, True),
-        phase_path=errors(phase_path, True),
-        workload=errors(work, False),
-        workload_agents=errors(work_agents, False),
-        phase_agents=errors(phase_agents, True),
+            rows["path"].append(m.hold(tr.t, along_path, t, age))
+    a = {name: np.array(r).reshape(len(ids), t.size) for name, r in rows.items()}
+    return m.team_errors(
+        t, a["x"], a["y"], a["lo"], a["hi"], a["direction"], a["phase"], a["workload"],
+        edge_model(run) or NO_EDGE, live=live_matrix(run, t, ids), ids=ids,
+        phase_path=a["path"],
     )

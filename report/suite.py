@@ -96,22 +96,31 @@ def suite_markdown(cases: list[dict[str, Any]], settings: dict[str, Any], below:
     lines += [
         "## Other measures (against truth)",
         "",
-        "| case | phase, path length (rad) | phase max (rad) | workload max (m^2) | "
-        "converged after (s) | revisit mean / worst / ideal (s) | speed-up | wall (s) |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+        "| case | phase, path length (rad) | phase, path length, max (rad) | "
+        "phase max (rad) | workload max (m^2) | workload / mean workload, "
+        "steady state / max (%) | converged after (s) | revisit mean / worst / ideal (s) | "
+        "speed-up | wall (s) |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
 
     def f(value: Any, digits: int = 3) -> str:
         return f"{value:.{digits}f}" if isinstance(value, (int, float)) else "n/a"
 
+    def percent(value: Any) -> str:
+        return f"{100 * value:.2f}" if isinstance(value, (int, float)) else "n/a"
+
     for c in cases:
         name = f"[{c.get('map')} {c.get('start')}]({c.get('dir')}/report.md)"
         if "error" in c:
-            lines.append(f"| {name} | {c['error']} | | | | | | |")
+            lines.append(f"| {name} | {c['error']} | | | | | | | | |")
             continue
+        # phase_sse_path_rad: the key of summaries written before phase_path_sse_rad
+        path_sse = c.get("phase_path_sse_rad", c.get("phase_sse_path_rad"))
         lines.append(
-            f"| {name} | {f(c.get('phase_sse_path_rad'))} | {f(c.get('phase_max_rad'))} | "
-            f"{f(c.get('workload_max_m2'))} | {f(c.get('converge_s'), 0)} | "
+            f"| {name} | {f(path_sse)} | {f(c.get('phase_path_max_rad'))} | "
+            f"{f(c.get('phase_max_rad'))} | {f(c.get('workload_max_m2'))} | "
+            f"{percent(c.get('workload_rel_sse'))} / {percent(c.get('workload_rel_max'))} | "
+            f"{f(c.get('converge_s'), 0)} | "
             f"{f(c.get('revisit_mean_s'), 0)} / {f(c.get('revisit_worst_s'), 0)} / "
             f"{f(c.get('revisit_ideal_s'), 0)} | {f(c.get('speedup'), 0)}x | "
             f"{f(c.get('wall_s'), 0)} |"

@@ -28,19 +28,27 @@ def write_synthetic_run(
     garbage: int = 0,
     phase_bias: tuple[float, ...] = (0.0,),
     hardware: bool = False,
+    edge_wave_m: float = 0.0,
 ) -> Path:
     """Write ``run_dir``/run.mcap: each robot sweeps its equal segment in ``cycle_s`` with
-    a phase offset decaying with time constant ``settle_s``, weaving across y = 0.
-    Wall (log) time runs ``speedup`` times slower than simulation time. ``phase_bias``:
-    added to the phase each robot publishes, as if its own pose estimate were off.
-    ``hardware``: record what a hardware run has, the agents' states and their poses (as
-    a localizer publishes them), with no world: no WorldInfo, Tick or ground truth."""
+    a phase offset decaying with time constant ``settle_s``, weaving across the local
+    edge. Wall (log) time runs ``speedup`` times slower than simulation time.
+    ``phase_bias``: added to the phase each robot publishes, as if its own pose
+    estimate were off. ``hardware``: record what a hardware run has, the agents' states
+    and their poses (as a localizer publishes them), with no world: no WorldInfo, Tick
+    or ground truth. ``edge_wave_m``: the edge is y = edge_wave_m sin(2 pi x / 3 m) +
+    edge_wave_m (recorded as WorldInfo.edge_y) instead of straight at y = 0."""
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     edge_lo, edge_hi = edge
     bin_m = 0.1
     n_bins = round((edge_hi - edge_lo) / bin_m)
     depth = [1.5 if edge_lo + (b + 0.5) * bin_m < 3.0 else 0.3 for b in range(n_bins)]
+
+    def local_edge(x: float) -> float:
+        return edge_wave_m * (math.sin(TWO_PI * x / 3.0) + 1.0)
+
+    edge_y = [local_edge(edge_lo + (b + 0.5) * bin_m) for b in range(n_bins)]
     info = WorldInfo(
         map="synthetic",
         start="offset",
@@ -56,6 +64,7 @@ def write_synthetic_run(
         robot_radius=0.17,
         min_depth=0.3,
         margin_out=0.3,
+        edge_y=edge_y if edge_wave_m else [],
     )
     bounds = np.linspace(edge_lo, edge_hi, robots + 1)
     wall0 = 1_700_000_000_000_000_000
@@ -75,7 +84,7 @@ def write_synthetic_run(
             going_up = phi < math.pi
             frac = phi / math.pi if going_up else 2.0 - phi / math.pi
             x = lo + (hi - lo) * frac
-            y = -0.3 + 0.8 * (0.5 - 0.5 * math.cos(TWO_PI * t / 2.0))
+            y = local_edge(x) - 0.3 + 0.8 * (0.5 - 0.5 * math.cos(TWO_PI * t / 2.0))
             poses.append((x, y, 0.0))
             if hardware:
                 pose = Pose(t, k, i, x, y, 0.0, source="pf")

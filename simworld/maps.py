@@ -156,6 +156,25 @@ class GridMap:
                 out.append(self.patrol_depth(0.5 * (a + z)))
         return out
 
+    def edge_y_bins(self, bin_m: float = 0.1) -> list[float]:
+        """The local edge's y per bin of width ``bin_m`` over [edge_lo, edge_hi] (the bins
+        of ``patrol_depth_bins``): the mean over the cell columns holding ice whose
+        centres fall in the bin."""
+        lo, hi = self.edge_lo, self.edge_hi
+        n_bins = max(1, math.ceil((hi - lo) / bin_m - 1e-9))
+        has_ice = self._edge_row >= 0
+        edge = self._y0 + self._edge_row * self.cell_m
+        centres = (np.arange(self.cols) + 0.5) * self.cell_m
+        out: list[float] = []
+        for b in range(n_bins):
+            a, z = lo + b * bin_m, min(hi, lo + (b + 1) * bin_m)
+            sel = (centres >= a) & (centres < z) & has_ice
+            if sel.any():
+                out.append(round(float(edge[sel].mean()), 9))
+            else:  # bins finer than the cells (or a column of water): the cell's own
+                out.append(self.edge_y(0.5 * (a + z)))
+        return out
+
     def check_room(self, where: str = "") -> None:
         """Refuse a map without room below the lowest edge for the robots and the laser."""
         need = ROBOT_ROOM_M + LASER_ROOM_M

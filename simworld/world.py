@@ -158,6 +158,7 @@ class World:
             "edge_hi": self.map.edge_hi,
             "bin_m": bin_m,
             "patrol_depth": self.map.patrol_depth_bins(bin_m),
+            "edge_y": self.map.edge_y_bins(bin_m),
             "robot_radius": ROBOT_RADIUS_M,
             "min_depth": MIN_DEPTH_M,
             "margin_out": MARGIN_OUT_M,

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from wire import AgentState, Cmd, DecodeError, Keys, Sense, Truth, decode, encode
+from wire import AgentState, Cmd, DecodeError, Keys, Sense, Truth, WorldInfo, decode, encode
 
 finite = st.floats(allow_nan=False, allow_infinity=False, min_value=-1e6, max_value=1e6)
 
@@ -101,6 +101,46 @@ def test_sense_carries_a_pose_or_none_and_a_bad_one_is_refused():
                            ({"pose": [2.5, math.inf, 0.0]}, "not finite")):
         with pytest.raises(DecodeError, match=reason):
             decode(Sense, msgpack.packb({**posed.__dict__, **change}))
+
+
+def world_info(**kw):
+    base = dict(map="m", start="in-phase", robots=3, localization="truth", seed=1,
+                duration_s=60.0, dt=0.1, edge_lo=0.0, edge_hi=0.3, bin_m=0.1,
+                patrol_depth=[0.3, 1.5, 0.3], robot_radius=0.17, min_depth=0.3,
+                margin_out=0.3)
+    base.update(kw)
+    return WorldInfo(**base)
+
+
+def test_world_info_round_trip_with_and_without_the_edge_shape():
+    straight = world_info()
+    assert decode(WorldInfo, encode(straight)) == straight and straight.edge_y == []
+    # a recording made before edge_y existed: no field at all, a straight edge
+    old = {k: v for k, v in straight.__dict__.items() if k != "edge_y"}
+    assert decode(WorldInfo, msgpack.packb(old)) == straight
+    curved = world_info(edge_y=[0.0, 0.25, -0.1])
+    assert decode(WorldInfo, encode(curved)) == curved
+
+
+@pytest.mark.parametrize(
+    "edge_y, reason",
+    [([0.0, math.nan, 0.0], "not finite"),
+     ([0.0, math.inf, 0.0], "not finite"),
+     ([0.0, 0.1], "one entry per patrol_depth bin"),
+     ([0.0, 0.1, 0.2, 0.3], "one entry per patrol_depth bin"),
+     ([0.0, "x", 0.0], "expected a number")],
+)
+def test_world_info_with_a_bad_edge_shape_is_refused(edge_y, reason):
+    payload = msgpack.packb({**world_info().__dict__, "edge_y": edge_y})
+    with pytest.raises(DecodeError, match=reason):
+        decode(WorldInfo, payload)
+
+
+def test_world_info_check_refuses_a_non_finite_edge_built_in_process():
+    from wire.messages import InvalidMessage
+
+    with pytest.raises(InvalidMessage, match="not finite"):
+        world_info(edge_y=[0.0, math.nan, 0.0]).check()
 
 
 @given(st.binary(max_size=200))

@@ -16,7 +16,7 @@ from report.faults import coverage
 from report.load import load_run
 from report.measures import speedup
 from report.series import time_grid
-from report.summary import KEYS
+from report.summary import KEYS, compute_summary
 from report.synthetic import write_synthetic_run
 from wire.codec import encode
 from wire.messages import Tick
@@ -137,3 +137,117 @@ def test_unreadable_recording_is_a_clear_error(tmp_path: Path) -> None:
     done = btrack("report", str(tmp_path))
     assert done.returncode == 2
     assert "cannot read" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_a_curved_edge_is_measured_along_its_local_edge(tmp_path: Path) -> None:
+    # the same team weaving about a sine edge 0 to 0.6 m above y = 0, recorded with the
+    # edge's shape: the same visits, so the same revisit times, as along a straight one
+    straight, curved = tmp_path / "straight", tmp_path / "curved"
+    write_synthetic_run(straight, duration_s=60.0)
+    write_synthetic_run(curved, duration_s=60.0, edge_wave_m=0.3)
+    run = load_run(curved / "run.mcap")
+    assert len(run.info["edge_y"]) == len(run.info["patrol_depth"]) == 60
+    # a straight edge records no shape; older recordings have no edge_y at all
+    old = load_run(straight / "run.mcap")
+    assert old.info["edge_y"] == []
+    del old.info["edge_y"]
+    assert compute_summary(old) == compute_summary(load_run(straight / "run.mcap"))
+    for d in (straight, curved):
+        done = btrack("report", str(d))
+        assert done.returncode == 0, done.stderr
+    ref, ours = (json.loads((d / "summary.json").read_text()) for d in (straight, curved))
+    for key in ("revisit_mean_s", "revisit_std_s", "revisit_worst_s", "revisit_ideal_s",
+                "revisit_optimum_s", "revisit_worst_ratio", "phase_sse_rad",
+                "workload_sse_m2", "workload_rel_sse", "still_frac_max"):
+        assert ours[key] == pytest.approx(ref[key], rel=0.01, abs=1e-6), key
+    # the old rule, crossings of y = 0, misses most of the curved run's visits
+    from report.measures import crossings
+    from report.series import edge_model
+
+    edge = edge_model(run)
+    for tr in run.truth.values():
+        seen = crossings(tr.t, tr.x, tr.y, edge)[0].size
+        assert seen == 60 and crossings(tr.t, tr.x, tr.y)[0].size < seen
+    assert (curved / "map.png").read_bytes()[:8] == PNG
+
+
+def test_team_measures_on_a_recordings_arrays_are_its_summary(tmp_path: Path) -> None:
+    # one implementation: the arrays of a recorded run (every robot and state on every
+    # tick) give team_measures the very numbers summary.json has
+    from report.measures import team_measures
+    from report.series import edge_model
+
+    write_synthetic_run(tmp_path, duration_s=120.0, robots=4, edge_wave_m=0.2,
+                        phase_bias=(0.0, 0.1))
+    run = load_run(tmp_path / "run.mcap")
+    summary = compute_summary(run)
+    ids = sorted(run.states)
+    assert all(np.array_equal(run.truth[i].t, run.tick_t) for i in ids)
+    arrays = {
+        "x": [run.truth[i].x for i in ids], "y": [run.truth[i].y for i in ids],
+        "lo": [run.states[i].lo for i in ids], "hi": [run.states[i].hi for i in ids],
+        "direction": [run.states[i].direction for i in ids],
+        "seen_phase": [run.states[i].phase for i in ids],
+        "seen_workload": [run.states[i].workload for i in ids],
+    }
+    edge = edge_model(run)
+    assert edge is not None and len(edge.edge_y) == 60
+    out = team_measures(run.tick_t, **{k: np.array(v) for k, v in arrays.items()}, edge=edge)
+    assert set(out) <= set(KEYS)
+    for key, value in out.items():
+        expected = summary[key]
+        if expected is None:
+            assert math.isnan(value), key
+        else:
+            assert value == pytest.approx(expected, rel=1e-12, abs=1e-12), key
+    assert summary["phase_sse_path_rad"] == summary["phase_path_sse_rad"]
+
+
+def test_report_quotes_every_measure_and_the_goals(tmp_path: Path) -> None:
+    from report.cli import ROWS
+    from report.summary import GOALS
+
+    write_synthetic_run(tmp_path, duration_s=60.0)
+    done = btrack("report", str(tmp_path))
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    text = (tmp_path / "report.md").read_text()
+    quoted = {key for key, _ in ROWS}
+    for key in ("phase_sse_rad", "phase_max_rad", "phase_path_sse_rad", "phase_path_max_rad",
+                "workload_sse_m2", "workload_max_m2", "workload_rel_sse", "workload_rel_max",
+                "workload_mean_m2", "phase_sse_agents_rad", "workload_sse_agents_m2",
+                "revisit_mean_s", "revisit_std_s", "revisit_worst_s", "revisit_optimum_s",
+                "revisit_worst_ratio", "revisit_ideal_s", "still_frac_max",
+                "workload_rel_converge_s"):
+        assert key in quoted, key
+    for _, label in ROWS:
+        assert f"| {label} |" in text, label
+    goals = text.split("## Goals")[1].split("\n\n")[1].splitlines()[2:]
+    assert len(goals) == len(GOALS)
+    # the synthetic run: phases settle (met), the workload is far from balanced (1.2 of
+    # 1.8 m^2, not met), points at segment ends are seen once in the 30 s window (the
+    # whole window is their worst, 1.5 x the 20 s optimum: not met), nobody stops
+    verdicts = {row.split("`")[1]: row.rsplit("|", 2)[1].strip() for row in goals}
+    assert verdicts == {"phase_sse_rad": "met", "phase_path_sse_rad": "met",
+                        "workload_rel_sse": "not met", "revisit_worst_ratio": "not met",
+                        "still_frac_max": "met"}
+    assert summary["workload_rel_sse"] == pytest.approx(1.2 / 1.8)
+    assert summary["revisit_worst_ratio"] == pytest.approx(1.5, abs=0.01)
+    assert "Not met: workload steady-state error / mean workload" in text
+
+
+def test_map_draws_the_local_edge_and_the_patrol_depth_above_it(tmp_path: Path) -> None:
+    from report.figures import edge_outline, map_figure
+
+    write_synthetic_run(tmp_path, duration_s=10.0, edge_wave_m=0.3)
+    run = load_run(tmp_path / "run.mcap")
+    sides, edge_y, depth = edge_outline(run)
+    assert sides.size == 61 and sides[0] == 0.0 and sides[-1] == pytest.approx(6.0)
+    assert list(edge_y) == run.info["edge_y"] and list(depth) == run.info["patrol_depth"]
+    assert edge_y.max() > 0.55 and edge_y.min() < 0.05  # the sine, not y = 0
+    map_figure(run, tmp_path / "map.png")
+    assert (tmp_path / "map.png").read_bytes()[:8] == PNG
+    # a recording without the edge's shape: straight at y = 0
+    run.info["edge_y"] = []
+    _, flat, _ = edge_outline(run)
+    assert flat.size == 60 and not flat.any()

@@ -223,3 +223,216 @@ def test_running_mean_and_smoothed_convergence_ignore_a_sawtooth():
     settled = m.converge_time(t, e[None, :], 0.15, smooth_s=10.0)
     assert 20.0 < settled < 40.0  # smoothed: the mean tooth (0.1) is inside the band
     assert np.allclose(m.running_mean(t, np.ones_like(t), 10.0), 1.0)
+
+
+# the local edge, idleness, the partition optimum, standing still, team_measures --------
+def sine_edge(bins: int = 60, bin_m: float = 0.1, depth: float = 0.3) -> m.EdgeModel:
+    """A curved edge over [0, 6]: y = 0.4 + 0.3 sin(2 pi x / 3), always above y = 0."""
+    centres = (np.arange(bins) + 0.5) * bin_m
+    return m.EdgeModel(0.0, bins * bin_m, bin_m, [depth] * bins,
+                       list(0.4 + 0.3 * np.sin(2 * PI * centres / 3.0)))
+
+
+def test_edge_model_local_edge_and_workload() -> None:
+    straight = m.EdgeModel(0.0, 0.3, 0.1, [1.0, 2.0, 3.0])
+    assert np.array_equal(straight.local_edge([-1.0, 0.1, 0.35]), [0.0, 0.0, 0.0])
+    assert straight.length == pytest.approx(0.3)
+    assert straight.total_workload == pytest.approx(0.6)
+    assert straight.workload(0.05, 0.15) == pytest.approx(0.15)
+    curved = m.EdgeModel(0.0, 0.3, 0.1, [1.0, 2.0, 3.0], [0.0, 0.2, -0.2])
+    # linear between the bins' centres (0.05, 0.15, 0.25), the end values beyond them
+    assert curved.local_edge([0.05, 0.1, 0.15, 0.2, 0.25]) == pytest.approx(
+        [0.0, 0.1, 0.2, 0.0, -0.2])
+    assert curved.local_edge([-5.0, 0.0, 0.3, 9.0]) == pytest.approx([0.0, 0.0, -0.2, -0.2])
+    assert np.isnan(curved.local_edge(np.nan))
+    # a last bin cut short by the edge's end has its centre in what is left of it
+    short = m.EdgeModel(0.0, 0.25, 0.1, [1.0, 1.0, 1.0], [0.0, 0.1, 0.3])
+    assert short.bin_centres(3) == pytest.approx([0.05, 0.15, 0.225])
+    # no depth profile (a recording with no world): no true workload
+    assert np.isnan(m.EdgeModel(0.0, 1.0, 0.1, ()).total_workload)
+
+
+def test_crossings_of_a_curved_edge_at_every_leg() -> None:
+    # a robot driving along the edge at 0.15 m/s, weaving 0.1 m about a local edge that
+    # lies 0.1 m to 0.7 m above y = 0: it crosses the edge on every leg of its weave,
+    # twice per 2 s period, but never the line y = 0
+    edge = sine_edge()
+    t = np.arange(0.0, 30.0 + 1e-9, 0.1)
+    x = 0.1 + 0.15 * t
+    y = 0.4 + 0.3 * np.sin(2 * PI * x / 3.0) + 0.1 * np.sin(PI * t + 0.3)
+    tc, xc = m.crossings(t, x, y, edge)
+    legs = np.arange(1, 31) - 0.3 / PI  # where pi t + 0.3 is a multiple of pi
+    assert tc.size == 30
+    assert tc == pytest.approx(legs, abs=0.02)
+    assert xc == pytest.approx(0.1 + 0.15 * legs, abs=0.003)
+    assert m.crossings(t, x, y)[0].size == 0  # the old rule, y = 0: never
+    # a straight edge model is the old rule, to the bit
+    y0 = 0.1 * np.sin(PI * t + 0.3)
+    old, new = m.crossings(t, x, y0), m.crossings(t, x, y0, m.EdgeModel(0.0, 6.0, 0.1, ()))
+    assert np.array_equal(old[0], new[0]) and np.array_equal(old[1], new[1])
+    # samples without a position are skipped, not crossed
+    y_gap = y.copy()
+    y_gap[50:55] = np.nan
+    assert m.crossings(t, x, y_gap, edge)[0].size == 29
+
+
+def test_sweep_index_counts_reversals() -> None:
+    t = np.arange(8.0)
+    direction = np.array([1, 1, -1, -1, np.nan, 1, 1, -1])
+    at = np.array([-1.0, 0.5, 2.0, 4.5, 5.0, 7.5])
+    assert list(m.sweep_index(t, direction, at)) == [0, 0, 1, 1, 2, 3]
+    assert list(m.sweep_index(np.empty(0), np.empty(0), at)) == [0] * 6
+
+
+def test_idleness_on_a_schedule_by_hand() -> None:
+    # point 0.5 visited at 0, 4 and 10 s; point 1.5 at 0, 5 and 10 s; point 2.5 at 3 s
+    visit_t = np.array([0.0, 4.0, 10.0, 0.0, 5.0, 10.0, 3.0])
+    visit_x = np.array([0.5, 0.5, 0.5, 1.5, 1.5, 1.5, 2.5])
+    gaps = m.point_gaps(np.array([0.5, 1.5]), visit_t, visit_x, 0.17, 0.0, 10.0)
+    # intervals 4, 6, 5, 5: mean 5, standard deviation sqrt(2 / 4), worst 6
+    mean, std, worst = m.idleness(gaps, 0.0, 10.0)
+    assert (mean, worst) == (5.0, 6.0)
+    assert std == pytest.approx(math.sqrt(0.5))
+    # a point seen once counts the whole window as its worst, and nothing in the mean
+    gaps = m.point_gaps(np.array([0.5, 1.5, 2.5]), visit_t, visit_x, 0.17, 0.0, 10.0)
+    assert m.idleness(gaps, 0.0, 10.0) == pytest.approx((5.0, math.sqrt(0.5), 10.0))
+    out = m.idleness_measures(gaps, 0.0, 10.0, team_sweep_rate=0.5, edge_length=3.0)
+    assert out["revisit_ideal_s"] == pytest.approx(6.0)  # L / (n v)
+    assert out["revisit_optimum_s"] == pytest.approx(12.0)  # 2 L / (n v)
+    assert out["revisit_worst_ratio"] == pytest.approx(10.0 / 12.0)
+    assert math.isnan(m.idleness([], 0.0, 10.0)[1])
+
+
+def test_partition_optimum() -> None:
+    assert m.partition_optimum(6.0, 0.75) == pytest.approx(16.0)
+    assert m.partition_optimum(6.0, 0.75, closed=True) == pytest.approx(8.0)
+    assert math.isnan(m.partition_optimum(6.0, 0.0))
+
+
+def lawnmower_team(
+    n: int = 3, edge: m.EdgeModel | None = None, v: float = 0.25, duration_s: float = 400.0,
+    dt: float = 0.1,
+) -> dict[str, np.ndarray]:
+    """n robots in phase, each sweeping its equal share of the edge back and forth at
+    along-edge speed v, weaving 0.1 m about the local edge every 0.5 s."""
+    edge = edge or sine_edge()
+    t = np.arange(0.0, duration_s + dt / 2, dt)
+    seg = edge.length / n
+    lo = edge.edge_lo + seg * np.arange(n)[:, None] + 0.0 * t
+    hi = lo + seg
+    frac = np.abs(((v * t / seg) % 2.0) - 1.0)  # 1 at lo at t = 0, then towards hi
+    frac = 1.0 - frac
+    x = lo + seg * frac
+    direction = np.where(((v * t / seg) % 2.0) < 1.0, 1.0, -1.0) + 0.0 * lo
+    y = edge.local_edge(x) + 0.1 * np.sin(2 * PI * t / 0.5 + 0.2)
+    phase = m.position_phase(x, lo, hi, direction)
+    return dict(t=t, x=x, y=y, lo=lo, hi=hi, direction=direction, seen_phase=phase,
+                seen_workload=edge.workload(lo, hi))
+
+
+def test_partitioned_patrol_is_near_the_optimum() -> None:
+    team = lawnmower_team()
+    out = m.team_measures(**team, edge=sine_edge())
+    # n v = 3 x 0.25 m/s: every point revisited within 2 L / (n v) = 16 s, at the ends
+    # of each share; the robot's radius makes the worst a little shorter
+    assert out["revisit_optimum_s"] == pytest.approx(16.0, rel=0.01)
+    assert out["revisit_ideal_s"] == pytest.approx(8.0, rel=0.01)
+    assert out["revisit_worst_ratio"] == pytest.approx(1.0, abs=0.06)
+    assert out["revisit_worst_ratio"] <= 1.0 + 1e-9
+    assert out["revisit_mean_s"] == pytest.approx(8.0, rel=0.1)
+    assert out["revisit_std_s"] > 0
+    assert out["phase_sse_rad"] == pytest.approx(0.0, abs=1e-9)
+    assert out["workload_sse_m2"] == pytest.approx(0.0, abs=1e-12)
+    assert out["workload_mean_m2"] == pytest.approx(0.6)  # 6 m x 0.3 m / 3
+    assert out["workload_rel_sse"] == pytest.approx(0.0, abs=1e-12)
+    assert out["still_frac_max"] == 0.0
+    assert out["phase_converge_s"] == 0.0 and out["workload_rel_converge_s"] == 0.0
+
+
+def test_team_measures_with_and_without_the_edge_shape() -> None:
+    curved = sine_edge()
+    team = lawnmower_team(edge=curved)
+    with_shape = m.team_measures(**team, edge=curved)
+    # the same motion along a straight edge at y = 0: the same visits, the same numbers
+    flat = {**team, "y": team["y"] - curved.local_edge(team["x"])}
+    straight = m.EdgeModel(0.0, 6.0, 0.1, curved.patrol_depth)
+    along_straight = m.team_measures(**flat, edge=straight)
+    path_keys = ("phase_path_sse_rad", "phase_path_max_rad")  # paths are longer curved
+    assert set(with_shape) == set(along_straight)
+    for key, value in with_shape.items():
+        if key not in path_keys:
+            assert value == pytest.approx(along_straight[key], abs=1e-9, nan_ok=True), key
+    # taken for straight, the curved run is never seen to cross the edge
+    blind = m.team_measures(**team, edge=straight)
+    assert math.isnan(blind["revisit_mean_s"])
+    assert blind["revisit_worst_s"] == pytest.approx(200.0)  # the whole second half
+
+
+def test_team_measures_keys_and_relative_workload() -> None:
+    # half the edge 1.5 m deep, half 0.3 m: 5.4 m^2 in all, 1.8 m^2 a robot for three
+    depth = [1.5] * 30 + [0.3] * 30
+    edge = m.EdgeModel(0.0, 6.0, 0.1, depth)
+    team = lawnmower_team(edge=edge)
+    out = m.team_measures(**team, edge=edge)
+    expected = {
+        "phase_sse_rad", "phase_max_rad", "phase_path_sse_rad", "phase_path_max_rad",
+        "workload_sse_m2", "workload_max_m2", "workload_rel_sse", "workload_rel_max",
+        "phase_sse_agents_rad", "workload_sse_agents_m2", "workload_mean_m2",
+        "revisit_mean_s", "revisit_std_s", "revisit_worst_s", "revisit_ideal_s",
+        "revisit_optimum_s", "revisit_worst_ratio", "still_frac_max", "phase_converge_s",
+        "workload_converge_s", "workload_rel_converge_s",
+    }
+    assert expected <= set(out) and all(isinstance(v, float) for v in out.values())
+    # equal shares: workloads 3.0, 1.8 and 0.6 m^2, both pairs 1.2 m^2 apart
+    assert out["workload_mean_m2"] == pytest.approx(1.8)
+    assert out["workload_sse_m2"] == pytest.approx(1.2)
+    assert out["workload_rel_sse"] == pytest.approx(1.2 / 1.8)
+    assert out["workload_rel_max"] == pytest.approx(1.2 / 1.8)
+    assert math.isnan(out["workload_converge_s"]) and math.isnan(out["workload_rel_converge_s"])
+    # the agents believed their shares were balanced
+    believed = {**team, "seen_workload": np.full_like(team["x"], 1.8)}
+    assert m.team_measures(**believed, edge=edge)["workload_sse_agents_m2"] == 0.0
+    # shares balanced at 1.2 and 2.4 m: every robot 1.8 m^2
+    lo = np.array([0.0, 1.2, 2.4])[:, None] + 0.0 * team["t"]
+    hi = np.array([1.2, 2.4, 6.0])[:, None] + 0.0 * team["t"]
+    balanced = m.team_measures(**{**team, "lo": lo, "hi": hi}, edge=edge)
+    assert balanced["workload_sse_m2"] == pytest.approx(0.0, abs=1e-12)
+    assert balanced["workload_rel_sse"] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_team_measures_with_a_robot_gone() -> None:
+    # robot 2 leaves for the last half: robots 0 and 1 are the only pair there, and the
+    # mean workload per robot is the edge's over two
+    edge = m.EdgeModel(0.0, 6.0, 0.1, [1.5] * 30 + [0.3] * 30)
+    team = lawnmower_team(edge=edge)
+    live = np.ones(team["x"].shape, dtype=bool)
+    live[2, team["t"] > 200.0] = False
+    out = m.team_measures(**team, edge=edge, live=live)
+    assert out["workload_mean_m2"] == pytest.approx(2.7)
+    assert out["workload_sse_m2"] == pytest.approx(1.2)  # pair 0-1 only: 1.8 - 3.0
+    assert out["workload_rel_sse"] == pytest.approx(1.2 / 2.7)
+    # the edge robot 2 no longer patrols is never visited in the second half
+    assert out["revisit_worst_s"] == pytest.approx(200.0, abs=0.2)
+
+
+def test_still_fraction() -> None:
+    t = np.arange(0.0, 100.0 + 1e-9, 0.1)
+    # moving at 0.1 m/s until 90 s, then stopped: 100 of the last quarter's 250 steps
+    x = 0.1 * np.minimum(t, 90.0)
+    y = np.zeros_like(t)
+    assert m.still_fraction(t, x, y, 75.0) == pytest.approx(0.4)
+    # creeping at 5 mm/s (0.5 mm a tick) counts as standing still; 2 cm/s does not
+    assert m.still_fraction(t, 0.005 * t, y, 75.0) == 1.0
+    assert m.still_fraction(t, 0.02 * t, y, 75.0) == 0.0
+    # steps while the robot is out of the team do not count
+    live = t < 90.0
+    assert m.still_fraction(t, x, y, 75.0, live) == 0.0
+    assert math.isnan(m.still_fraction(t, x, y, 200.0))
+    # in a team, the robot that stood still longest: robot 1 stops at 350 s of 400 s
+    edge = m.EdgeModel(0.0, 6.0, 0.1, [0.3] * 60)
+    team = lawnmower_team(edge=edge)
+    stop = team["t"] >= 350.0
+    for name in ("x", "y"):
+        team[name][1, stop] = team[name][1, stop][0]
+    out = m.team_measures(**team, edge=edge)
+    assert out["still_frac_max"] == pytest.approx(0.5, abs=0.01)  # 50 of the last 100 s

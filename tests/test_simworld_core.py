@@ -98,6 +98,17 @@ def test_png_sloped_edge_algae_and_scale(tmp_path) -> None:
     assert m2.edge_hi == pytest.approx(0.9) and m2.algae_depth(0.12) == pytest.approx(0.4)
 
 
+def test_edge_y_bins_follow_a_sloped_edge(tmp_path) -> None:
+    m = load_png(_png(tmp_path, _sloped_image()), scale_m_per_px=0.05)
+    # two 0.05 m columns per 0.1 m bin, the edge one pixel higher in each; the last
+    # bin holds column 8 only (column 9 is water)
+    bins = m.edge_y_bins(0.1)
+    assert bins == pytest.approx([0.025, 0.125, 0.225, 0.325, 0.4])
+    assert len(bins) == len(m.patrol_depth_bins(0.1))
+    assert m.edge_y_bins(0.05) == pytest.approx([0.05 * c for c in range(9)])
+    assert builtin_map("half-algae").edge_y_bins() == [0.0] * 60
+
+
 def test_png_deep_algae_sets_patrol_depth(tmp_path) -> None:
     img = np.zeros((80, 4, 3), dtype=np.uint8)
     img[:, :] = BLUE
@@ -269,3 +280,4 @@ def test_world_info_fields() -> None:
     info = WorldInfo(**run, duration_s=10.0, dt=0.1, **w.info())  # type: ignore[arg-type]
     assert decode(WorldInfo, encode(info)) == info
     assert info.robot_radius == 0.17 and info.min_depth == 0.3 and len(info.patrol_depth) == 60
+    assert info.edge_y == [0.0] * 60  # the built-in maps' edge is straight at y = 0

@@ -264,11 +264,18 @@ class WorldInfo:
     realtime: bool = False
     odom_noise: float = 0.02  # odometry std, fraction of each step's distance
     odom_turn_noise: float = 0.02  # and of each step's turn
+    # the local edge's y per bin from edge_lo (the bins of patrol_depth), m; empty for a
+    # straight edge at y = 0, as every recording made before the field existed
+    edge_y: list[float] = field(default_factory=list)
 
     def check(self) -> None:
         _require(self.edge_lo < self.edge_hi and self.bin_m > 0, "bad edge or bin")
         _require(all(d >= 0 for d in self.patrol_depth), "negative patrol depth")
         _require(self.robots >= 1 and self.dt > 0, "bad robots or dt")
+        if self.edge_y:
+            _require(len(self.edge_y) == len(self.patrol_depth),
+                     "edge_y: one entry per patrol_depth bin")
+            _require(all(math.isfinite(y) for y in self.edge_y), "edge_y: not finite")
 
 
 FAULT_KINDS = ("kill", "restart", "freeze", "thaw", "join")
