@@ -1,10 +1,8 @@
 """The thesis's twelve cases in one process, for choosing gains: seconds, not minutes.
 
-The world core (``simworld.world.World``) and one ``agent.controller.Controller`` per
-robot, stepped in lockstep the way the bus runs them: at tick k every agent gets its
-robot's sensing and pose (the simulator's truth, or with ``--localization odometry``
-its dead reckoning) and its neighbours' states of tick k-1, then the world steps with
-every command. The measures are the report's (``report.measures``): the mean |error|
+The in-process engine (``deploy.engine``, which ``btrack suite general`` runs too): the
+world core and one controller per robot, stepped in lockstep the way the bus runs
+them. The measures are the report's (``report.measures``): the mean |error|
 over neighbour pairs and the last quarter, phase by the thesis's eq. 3.1 from the true
 x, workload from the boundaries and the map's true depth profile; and, as the suite
 reports for odometry, the same from the phases and workloads the agents published.
@@ -38,16 +36,14 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from agent import config as agent_config  # noqa: E402
-from agent.controller import Controller, Neighbour, initial_segment  # noqa: E402
+from deploy import engine  # noqa: E402
 from deploy.procs import non_negative  # noqa: E402
 from report import measures as m  # noqa: E402
 from report.thesis import MAPS, PHASE_SSE_RAD, STARTS, WORKLOAD_SSE_M2, thesis_cell  # noqa: E402
-from simworld.maps import load_map  # noqa: E402
-from simworld.world import ODOM_NOISE, World  # noqa: E402
+from simworld.world import ODOM_NOISE  # noqa: E402
 
-DT_S = 0.1  # the world's tick at 10 Hz control
 ROBOTS = 3
-BIN_M = 0.1  # the report's depth bins (the world's WorldInfo default)
+BIN_M = engine.BIN_M
 
 
 @dataclass
@@ -63,52 +59,23 @@ class Case:
 
 
 def run_case(case: Case) -> dict[str, Any]:
-    """One case in lockstep; its steady-state errors (against ground truth, and as the
-    agents saw them) and the robots' true tracks."""
-    gains, patrol, limits = agent_config.load(None, case.overrides)
-    gmap = load_map(case.map, seed=case.seed)
-    world = World(gmap, ROBOTS, case.start, seed=case.seed, odom_noise=case.odom_noise,
-                  odom_turn_noise=case.odom_turn_noise)
-    odometry = case.localization == "odometry"
-    lo_e, hi_e = gmap.edge_lo, gmap.edge_hi
-    ticks = int(round(case.duration_s / DT_S))
-    x, y = np.zeros((ROBOTS, ticks)), np.zeros((ROBOTS, ticks))
-    lo, hi, direction, seen_phase, seen_work = (np.zeros((ROBOTS, ticks)) for _ in range(5))
-    controllers: list[Controller] = []
-    published: list[Neighbour | None] = [None] * ROBOTS  # each agent's state of tick k-1
-    for k in range(ticks):
-        cmds, now = {}, []
-        for i in range(ROBOTS):
-            reading = world.sense(i)
-            px, py, pth = world.odometry_pose(i) if odometry else world.truth(i)
-            if k == 0:
-                seg = initial_segment(i, ROBOTS, lo_e, hi_e)
-                controllers.append(Controller(i, *seg, lo_e, hi_e, px, gains, patrol, limits))
-            out = controllers[i].step(
-                DT_S, px, py, pth, reading.ice, reading.algae,
-                published[i - 1] if i > 0 else None,
-                published[i + 1] if i + 1 < ROBOTS else None,
-                i > 0, i + 1 < ROBOTS,
-            )
-            now.append(controllers[i].published)  # what agent i puts on the bus
-            cmds[i] = (out.v, out.omega)
-            x[i, k], y[i, k] = world.truth(i)[:2]
-            lo[i, k], hi[i, k], direction[i, k] = out.lo, out.hi, out.direction
-            seen_phase[i, k], seen_work[i, k] = out.phase, out.workload
-        published = list(now)
-        world.step(cmds, DT_S)
-    t = np.arange(ticks) * DT_S
-    ids = range(ROBOTS)
+    """One case in lockstep (``deploy.engine``); its steady-state errors (against ground
+    truth, and as the agents saw them) and the robots' true tracks."""
+    gmap, tr = engine.run(engine.EngineCase(
+        map=case.map, robots=ROBOTS, start=case.start, duration_s=case.duration_s,
+        seed=case.seed, overrides=case.overrides, localization=case.localization,
+        odom_noise=case.odom_noise, odom_turn_noise=case.odom_turn_noise))
+    t, ids = tr.t, range(ROBOTS)
     depth = gmap.patrol_depth_bins(BIN_M)  # what the world tells the recorder
-    phase = {i: m.position_phase(x[i], lo[i], hi[i], direction[i]) for i in ids}
-    work = {i: m.true_workload(lo[i], hi[i], lo_e, BIN_M, depth) for i in ids}
+    phase = {i: m.position_phase(tr.x[i], tr.lo[i], tr.hi[i], tr.direction[i]) for i in ids}
+    work = {i: m.true_workload(tr.lo[i], tr.hi[i], gmap.edge_lo, BIN_M, depth) for i in ids}
     pairs = m.neighbour_pairs(list(ids))
     phase_sse, _ = m.steady_state(t, m.pair_errors(phase, pairs, wrap=True))
     work_sse, _ = m.steady_state(t, m.pair_errors(work, pairs, wrap=False))
     seen_phase_sse, _ = m.steady_state(
-        t, m.pair_errors({i: seen_phase[i] for i in ids}, pairs, wrap=True))
+        t, m.pair_errors({i: tr.phase[i] for i in ids}, pairs, wrap=True))
     seen_work_sse, _ = m.steady_state(
-        t, m.pair_errors({i: seen_work[i] for i in ids}, pairs, wrap=False))
+        t, m.pair_errors({i: tr.workload[i] for i in ids}, pairs, wrap=False))
     return {
         "map": case.map, "start": case.start, "seed": case.seed,
         "duration_s": case.duration_s,
@@ -117,7 +84,7 @@ def run_case(case: Case) -> dict[str, Any]:
         "phase_sse_agents_rad": seen_phase_sse, "workload_sse_agents_m2": seen_work_sse,
         "thesis_phase_sse_rad": thesis_cell(PHASE_SSE_RAD, case.map, case.start),
         "thesis_workload_sse_m2": thesis_cell(WORKLOAD_SSE_M2, case.map, case.start),
-        "x": x, "y": y,
+        "x": tr.x, "y": tr.y,
     }
 
 

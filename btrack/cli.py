@@ -17,7 +17,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "localizer": ("localizer.process", "laser localisation: one particle filter per robot"),
     "record": ("recorder.process", "record everything on the bus into an MCAP file"),
     "report": ("report.cli", "measures, summary.json and figures from a recorded run"),
-    "suite": ("deploy.suite", "the thesis's twelve cases, each a full team, and its tables"),
+    "suite": ("deploy.suite", "the thesis's twelve cases, or general: random maps x teams"),
     "router": ("deploy.router", "a Zenoh router (the base station's), TLS and access control"),
     "deploy": ("deploy.cli", "a fleet's configurations, units and certificates from FLEET.toml"),
     "bridge": ("hwbridge.cli", "real devices on the bus: iRobot Create, SICK LMS 2xx"),

@@ -48,7 +48,9 @@ def build_parser() -> argparse.ArgumentParser:
         "tables 7.1 and 7.2), each a full multi-process team, and write the tables with "
         "the thesis's value beside ours.",
     )
-    p.add_argument("name", choices=["thesis"], help="the suite to run (thesis)")
+    p.add_argument("name", choices=["thesis", "general"],
+                   help="the suite to run: thesis, or general (random maps and team sizes; "
+                   "btrack suite general --help)")
     p.add_argument("--out", type=Path, help="output directory (default runs/suite-<time>)")
     p.add_argument("--localization", default=None,
                    help="pose source for every case, as for btrack sim (default: btrack "
@@ -165,6 +167,10 @@ def run_cases(args: argparse.Namespace, cases: list[Case]) -> list[dict[str, Any
 
 
 def main(argv: list[str] | None = None) -> int:
+    if argv and argv[0] == "general":
+        from deploy.general import main as general
+
+        return general(argv[1:])
     args = build_parser().parse_args(argv)
     if args.jobs < 1 or not args.duration > 0:
         print("btrack suite: --jobs must be at least 1 and --duration positive",

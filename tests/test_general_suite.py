@@ -1,0 +1,104 @@
+"""``btrack suite general``: its cases, its in-process engine (bit for bit a bus run),
+its outputs and its refusals."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from deploy.general import MIN_DURATION_S, TEAM_SIZES, belief_gap, goals_met, make_cases
+from report.load import load_run
+from simworld.maps import load_map
+from simworld.procedural import ALGAE, EDGES
+from tests.procutil import run_sim
+
+
+def suite(*args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "btrack", "suite", "general", *args],
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def test_cases_come_from_the_seed_and_hold_every_kind():
+    cases = make_cases(40, 7)
+    assert cases == make_cases(40, 7)
+    assert cases != make_cases(40, 8)
+    assert {c.robots for c in cases} == set(TEAM_SIZES)
+    assert {c.edge for c in cases} == set(EDGES) and {c.algae for c in cases} == set(ALGAE)
+    for c in cases:
+        assert c.length_m / c.robots >= 0.6 and 3.0 <= c.length_m <= 30.0
+        assert c.duration_s >= MIN_DURATION_S
+        gmap = load_map(c.map)  # the name alone gives the map back
+        assert gmap.edge_hi - gmap.edge_lo == pytest.approx(c.length_m, abs=0.011)
+    # a long edge shared by few robots runs longer than the minimum
+    assert max(c.duration_s for c in cases) > MIN_DURATION_S
+    with pytest.raises(ValueError, match="need"):
+        make_cases(1, 1, sizes=(100,))
+
+
+def test_the_belief_goal_allows_a_fifth_or_two_thousandths():
+    assert belief_gap(0.1, 0.119) == 0.0
+    assert belief_gap(0.1, 0.13) == pytest.approx(0.01)
+    assert belief_gap(0.001, 0.0029) == 0.0
+    row = {"phase_sse_rad": 0.01, "phase_path_sse_rad": 0.2, "workload_rel_sse": 0.001,
+           "workload_belief_gap_m2": 0.0, "revisit_worst_ratio": 1.1, "still_frac_max": 0.05}
+    met = goals_met(row)
+    assert not met["path-length phase"] and sum(met.values()) == 5
+    assert not goals_met({})["position phase"]  # a measure missing is not a goal met
+
+
+def test_in_process_engine_is_the_bus_run_bit_for_bit(tmp_path):
+    out = tmp_path / "general"
+    res = suite("--cases", "1", "--sizes", "5", "--duration", "40", "--jobs", "1",
+                "--tracks", "--out", str(out))
+    assert res.returncode in (0, 1), res.stderr[-3000:]  # 1: goals, not errors
+    doc = json.loads((out / "summary.json").read_text())
+    (row,) = doc["cases"]
+    assert "error" not in row
+    tracks = np.load(out / "tracks" / "case000.npz")
+    sim = run_sim(tmp_path / "bus", "--robots", "5", "--map", row["map"], "--start",
+                  row["start"], "--seed", str(row["seed"]), "--duration", "40",
+                  "--localization", "truth", "--no-report")
+    assert sim.returncode == 0, sim.stderr[-3000:]
+    run = load_run(tmp_path / "bus")
+    ticks = tracks["x"].shape[1]
+    assert tracks["x"].shape == (5, 400)
+    for i in range(5):
+        truth = run.truth[i]
+        assert np.array_equal(truth.x[:ticks], tracks["x"][i])
+        assert np.array_equal(truth.y[:ticks], tracks["y"][i])
+    assert np.ptp(tracks["y"]) > 0.5  # the team did patrol
+
+
+def test_outputs_quote_every_measure_and_the_goals(tmp_path):
+    out = tmp_path / "g"
+    res = suite("--cases", "2", "--sizes", "2", "3", "--duration", "60", "--jobs", "2",
+                "--out", str(out))
+    assert res.returncode in (0, 1), res.stderr[-3000:]
+    assert "[##" in res.stdout and "2 cases in" in res.stdout
+    doc = json.loads((out / "summary.json").read_text())
+    assert doc["engine"] == "inprocess" and len(doc["cases"]) == 2
+    for row in doc["cases"]:
+        for key in ("phase_sse_rad", "phase_path_sse_rad", "workload_rel_sse",
+                    "workload_sse_agents_m2", "revisit_mean_s", "revisit_std_s",
+                    "revisit_worst_s", "revisit_optimum_s", "still_frac_max"):
+            assert key in row, key
+        assert set(row["goals"]) == set(doc["meet_goal"])
+    report = (out / "report.md").read_text()
+    assert "position phase" in report and "path-length phase" in report
+    assert "procedural:" in report
+    assert (out / "general.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--localization", "pf"], "use --engine bus"),
+    (["--cases", "0"], "at least 1"),
+    (["--duration", "-1"], "positive"),
+    (["--sizes", "0"], "team sizes"),
+])
+def test_bad_options_are_refused(tmp_path, args, message):
+    res = suite(*args, "--out", str(tmp_path / "x"))
+    assert res.returncode == 2 and message in res.stderr
