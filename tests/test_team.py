@@ -1,0 +1,238 @@
+"""What the team agrees on over neighbour-only messages (agent.team): chain maxima that
+forget a need that left, passes per sweep with hysteresis, the root's rate; and the
+agreement of a chain of control cores (agent.controller) on them."""
+
+from __future__ import annotations
+
+import math
+import random
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from agent.team import ChainMax, TeamRate, chain_max, cycle_for, passes_for, team_max
+
+needs_st = st.lists(st.floats(0.01, 1000.0), min_size=2, max_size=20)
+
+
+def chain_round(needs: list[float], prev: list[ChainMax | None]
+                ) -> tuple[list[ChainMax], list[float]]:
+    """One synchronous round of the neighbour-only update, as Controller._agree does
+    it: every robot from its own value and its neighbours' of the previous round.
+    Returns the new chain maxima and each robot's view of the team's maximum."""
+    n = len(needs)
+    new, seen = [], []
+    for i, own in enumerate(needs):
+        lower = prev[i - 1] if i > 0 else None
+        upper = prev[i + 1] if i + 1 < n else None
+        below = lower.below if lower is not None else None
+        above = upper.above if upper is not None else None
+        new.append(chain_max(own, below, above))
+        seen.append(team_max(own, below, above))
+    return new, seen
+
+
+def exact_maxima(needs: list[float]) -> list[ChainMax]:
+    return [ChainMax(max(needs[: i + 1]), max(needs[i:])) for i in range(len(needs))]
+
+
+# --- 1. chain maxima ---------------------------------------------------------------
+
+
+@given(needs_st)
+def test_every_robot_knows_the_team_maximum_after_one_round_per_robot(needs):
+    n = len(needs)
+    state: list[ChainMax | None] = [None] * n
+    for _ in range(n):
+        state, seen = chain_round(needs, state)
+    assert seen == [max(needs)] * n
+    assert state == exact_maxima(needs)  # what each publishes: below / above itself
+
+
+@given(needs_st)
+def test_the_maximum_travels_one_robot_per_round_and_no_faster(needs):
+    """A unique maximum at robot 0 reaches robot n-1 at round n, not before: the
+    update is neighbour-only, and the bound of n rounds is tight."""
+    n = len(needs)
+    needs = [max(needs) + 1.0] + needs[1:]
+    state: list[ChainMax | None] = [None] * n
+    for r in range(1, n + 1):
+        state, seen = chain_round(needs, state)
+        # robot i has heard of robot 0 once r > i
+        assert [s == needs[0] for s in seen] == [i < r for i in range(n)]
+
+
+@given(needs_st, st.data())
+def test_a_need_that_leaves_the_chain_is_forgotten_within_n_rounds(needs, data):
+    n = len(needs)
+    state: list[ChainMax | None] = [None] * n
+    for _ in range(n):
+        state, _ = chain_round(needs, state)
+    top = needs.index(max(needs))
+    if data.draw(st.booleans(), label="remove a robot"):
+        # a robot dies (the largest need's, or any): its neighbours re-link, each
+        # starting from the other's last published maxima, which still hold its need
+        gone = data.draw(st.sampled_from([top, data.draw(st.integers(0, n - 1))]))
+        needs = needs[:gone] + needs[gone + 1:]
+        state = state[:gone] + state[gone + 1:]
+    else:  # the hardest segment got easier
+        needs = list(needs)
+        needs[top] = data.draw(st.floats(0.001, 1.0)) * needs[top]
+    for _ in range(n):
+        state, seen = chain_round(needs, state)
+    assert seen == [max(needs)] * len(needs)
+    assert state == exact_maxima(needs)
+
+
+@settings(max_examples=40)
+@given(needs_st)
+def test_a_naive_max_consensus_never_forgets_but_chain_maxima_do(needs):
+    """x_i <- max(need_i, x_i, x_{i-1}, x_{i+1}) agrees as fast, but once the largest
+    need leaves the team (its segment got easy) nothing ever lowers it again."""
+    n = len(needs)
+    needs = list(needs)
+    top = needs.index(max(needs))
+    needs[top] += 1.0  # a unique maximum
+    old = needs[top]
+
+    def naive_round(x: list[float]) -> list[float]:
+        return [max(needs[i], *x[max(0, i - 1): i + 2]) for i in range(n)]
+
+    naive = [0.0] * n
+    state: list[ChainMax | None] = [None] * n
+    for _ in range(n):
+        naive = naive_round(naive)
+        state, _ = chain_round(needs, state)
+    assert naive == [old] * n
+    needs[top] = 0.5 * min(needs)  # now the smallest: the true maximum is lower
+    truth = max(needs)
+    for _ in range(3 * n):
+        naive = naive_round(naive)
+        state, seen = chain_round(needs, state)
+    assert naive == [old] * n  # stuck on the need that left
+    assert seen == [truth] * n and truth < old
+
+
+def test_team_max_takes_missing_neighbours_for_nothing():
+    assert team_max(2.0, None, None) == 2.0
+    assert team_max(2.0, 5.0, None) == 5.0 and team_max(2.0, None, 7.0) == 7.0
+    assert chain_max(3.0, 1.0, 9.0) == ChainMax(3.0, 9.0)
+    assert chain_max(3.0, None, None) == ChainMax(3.0, 3.0)
+
+
+# --- 2. passes per sweep -------------------------------------------------------------
+
+lengths = st.floats(0.01, 100.0)
+spacings = st.floats(0.02, 2.0)
+
+
+@given(lengths, spacings, st.integers(1, 60),
+       st.none() | st.integers(1, 400), st.floats(0.0, 0.5))
+def test_passes_never_too_few_nor_too_far_apart(longest, spacing, min_passes, current, hyst):
+    p = passes_for(longest, spacing, min_passes, current, hyst)
+    assert isinstance(p, int) and p >= min_passes
+    assert longest / p <= spacing * (1 + 1e-9)
+    # nor too many: kept only while one fewer would fit with less than hyst to spare
+    assert p <= max(min_passes, math.ceil(longest / spacing - 1e-9),
+                    longest / ((1 - hyst) * spacing) + 1 + 1e-9)
+
+
+@given(lengths, spacings, st.integers(1, 60))
+def test_passes_from_scratch_are_the_fewest_that_fit(longest, spacing, min_passes):
+    p = passes_for(longest, spacing, min_passes)
+    if p > min_passes:  # one fewer would leave passes too far apart
+        assert longest / (p - 1) > spacing * (1 - 1e-9)
+
+
+@given(st.integers(0, 2**32 - 1), st.integers(1, 40), st.integers(0, 40), spacings)
+def test_a_length_hovering_at_a_threshold_does_not_flip_the_passes(seed, min_passes, k, spacing):
+    """A random walk within +-1 % of k + min_passes passes' worth of spacing, 1000 steps:
+    the passes change at most once."""
+    k += min_passes
+    rng = random.Random(seed)
+    u, current, changes = 0.0, None, 0
+    for _ in range(1000):
+        u = min(0.01, max(-0.01, u + rng.uniform(-0.003, 0.003)))
+        p = passes_for(k * spacing * (1 + u), spacing, min_passes, current)
+        changes += current is not None and p != current
+        current = p
+    assert changes <= 1
+    assert current in (k, k + 1)
+
+
+def test_without_hysteresis_that_length_would_flip_every_step():
+    flips = [passes_for(20 * 0.3 * (1.01 if i % 2 else 0.99), 0.3, 16,
+                        21 if i % 2 == 0 else 20, hysteresis=0.0) for i in range(6)]
+    assert flips == [20, 21] * 3
+    hyst = [passes_for(20 * 0.3 * (1.01 if i % 2 else 0.99), 0.3, 16, 21) for i in range(6)]
+    assert hyst == [21] * 6
+
+
+@given(st.integers(1, 40), st.integers(0, 40), spacings, st.floats(0.0, 0.4),
+       st.floats(0.001, 0.9))
+def test_passes_drop_only_once_the_length_is_well_below(min_passes, k, spacing, hyst, drop):
+    k += min_passes
+    current = passes_for(k * spacing * 1.01, spacing, min_passes, hysteresis=hyst)
+    assert current == k + 1
+    # shrunk, but by less than the hysteresis: still k + 1
+    within = k * spacing * (1 - hyst) * 1.001
+    assert passes_for(within, spacing, min_passes, current, hyst) == current
+    # shrunk by more: down to what fits, at once
+    shrunk = k * spacing * (1 - hyst) * (1 - drop)
+    lower = passes_for(shrunk, spacing, min_passes, current, hyst)
+    assert lower < current and lower == passes_for(shrunk, spacing, min_passes)
+
+
+@pytest.mark.parametrize("args", [
+    (0.0, 0.3, 16), (-1.0, 0.3, 16), (5.0, 0.0, 16), (5.0, -0.3, 16), (5.0, 0.3, 0),
+    (math.nan, 0.3, 16),
+])
+def test_passes_refuse_bad_inputs(args):
+    with pytest.raises(ValueError):
+        passes_for(*args)
+
+
+def test_cycle_is_two_arcs_a_pass_with_the_margin():
+    assert cycle_for(4.0, 16, 1.15) == pytest.approx(2 * 16 * 4.0 * 1.15)
+
+
+# --- 3. the root's rate ---------------------------------------------------------------
+
+cycles = st.floats(1.0, 200.0)
+
+
+@given(cycles, st.floats(1.0001, 10.0), st.floats(0.01, 0.5))
+def test_the_rate_rises_at_once(start, ratio, dt):
+    rate = TeamRate()
+    assert rate.update(start, dt) == start  # the first target is taken as it is
+    assert rate.update(start * ratio, dt) == start * ratio
+    assert rate.cycle_s == start * ratio
+
+
+@settings(max_examples=40)
+@given(cycles, st.floats(0.1, 0.95), st.floats(0.02, 0.5))
+def test_the_rate_falls_slowly_without_undershooting(start, ratio, dt):
+    target = start * ratio
+    rate = TeamRate(start)
+    gap0 = start - target
+    steps = math.ceil(3 * start / dt)
+    early = int(0.1 * target / dt)
+    prev = start
+    for k in range(1, steps + 1):
+        now = rate.update(target, dt)
+        assert target <= now <= prev  # monotone, never below the target
+        if k == early:  # not at once: after a tenth of the target cycle, most to go
+            assert now - target > 0.85 * gap0
+        prev = now
+    assert prev - target <= 0.05 * target  # within 5 % in three (start) cycles
+
+
+@pytest.mark.parametrize("bad", [0.0, -5.0, math.nan])
+def test_the_rate_refuses_a_target_that_is_not_positive(bad):
+    rate = TeamRate(100.0)
+    with pytest.raises(ValueError):
+        rate.update(bad, 0.1)
+    assert rate.cycle_s == 100.0
+    with pytest.raises(ValueError):
+        TeamRate().update(bad, 0.1)
