@@ -8,9 +8,10 @@ import math
 import random
 
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
+from agent.controller import Controller, Gains, Neighbour, initial_segment
 from agent.team import ChainMax, TeamRate, chain_max, cycle_for, passes_for, team_max
 
 needs_st = st.lists(st.floats(0.01, 1000.0), min_size=2, max_size=20)
@@ -236,3 +237,158 @@ def test_the_rate_refuses_a_target_that_is_not_positive(bad):
     assert rate.cycle_s == 100.0
     with pytest.raises(ValueError):
         TeamRate().update(bad, 0.1)
+
+
+# --- 4. a chain of control cores ------------------------------------------------------
+
+# The boundaries stay put (k_s so small that no move survives rounding; the workload
+# balance is tested elsewhere), so every robot's need and segment are fixed and the
+# agreement on them can be checked exactly.
+FROZEN = Gains(k_s=1e-300)
+DT = 0.1
+
+
+@st.composite
+def teams(draw):
+    n = draw(st.integers(2, 20))
+    length = draw(st.floats(max(3.0, 0.6 * n), 30.0))
+    # a depth sample in each robot's segment (where, how deep), or none
+    samples = draw(st.lists(st.none() | st.tuples(st.floats(0.1, 0.9), st.floats(0.3, 3.0)),
+                            min_size=n, max_size=n))
+    return n, length, samples
+
+
+def make_team(n: int, length: float, samples) -> list[Controller]:
+    ctrls = []
+    for i in range(n):
+        lo, hi = initial_segment(i, n, 0.0, length)
+        c = Controller(i, lo, hi, 0.0, length, 0.5 * (lo + hi), gains=FROZEN)
+        if samples[i] is not None:
+            where, depth = samples[i]
+            c.depth_map.record(lo + where * (hi - lo), depth)
+        ctrls.append(c)
+    return ctrls
+
+
+def lockstep(ctrls: list[Controller], ticks: int, dead_lower: Neighbour | None = None
+             ) -> list[list[tuple[int, float]]]:
+    """Step the chain in lockstep, each robot standing below the edge (y = -1, no ice
+    nor algae) and seeing its neighbours' states of the previous tick. ``dead_lower``:
+    the last state of a robot below the chain's first that has died (membership says
+    it is gone, has_lower False). Returns each tick's (passes, cycle_s) per robot."""
+    n = len(ctrls)
+    published = [c.published for c in ctrls]
+    history = []
+    for _ in range(ticks):
+        for i, c in enumerate(ctrls):
+            lower = published[i - 1] if i > 0 else dead_lower
+            upper = published[i + 1] if i + 1 < n else None
+            c.step(DT, c.patrol.x, -1.0, math.pi / 2, False, False, lower, upper,
+                   i > 0, i + 1 < n)
+        published = [c.published for c in ctrls]
+        history.append([(c.passes, c.cycle_s) for c in ctrls])
+    return history
+
+
+def need_of(c: Controller) -> float:
+    return c.patrol.pass_need_s(c.lo, c.hi, c.limits.v_max, c.limits.wheel_base_m)
+
+
+def assert_copies_with_lag(history, since: int) -> None:
+    """Robot i's decision at tick t is the root's (robot 0 of ``history``) of tick t - i:
+    the decision travels down the chain one robot per tick."""
+    n = len(history[0])
+    for t in range(since, len(history)):
+        for i in range(1, n):
+            if t - i >= since:
+                assert history[t][i] == history[t - i][0], (t, i)
+
+
+@settings(max_examples=8, deadline=None)
+@given(teams())
+@example((20, 30.0, [None] * 19 + [(0.5, 3.0)]))  # the hardest segment furthest away
+@example((2, 30.0, [(0.5, 0.3), (0.5, 2.0)]))  # 15 m segments: more than the minimum
+def test_a_chain_of_controllers_agrees_on_the_roots_passes_and_cycle(team):
+    n, length, samples = team
+    ctrls = make_team(n, length, samples)
+    cfg, margin = ctrls[0].patrol.config, FROZEN.cycle_margin
+    ticks = max(50, 2 * n + 5)
+    history = lockstep(ctrls, ticks)
+    assert_copies_with_lag(history, 0)
+    # the root hears the farthest need after n - 1 ticks, its decision reaches the
+    # farthest robot n - 1 ticks later: from then on the chain agrees exactly
+    for t in range(2 * n - 2, ticks):
+        assert history[t] == [history[t][0]] * n, t
+    passes, cycle = history[-1][0]
+    longest = max(c.hi - c.lo for c in ctrls)
+    assert passes * cfg.max_spacing_m >= longest - 1e-9
+    assert passes == passes_for(longest, cfg.max_spacing_m, cfg.passes_per_sweep)
+    assert cycle > 0
+    assert cycle == pytest.approx(cycle_for(max(need_of(c) for c in ctrls), passes, margin),
+                                  rel=1e-12)
+    for c in ctrls:  # what each publishes: the chain maxima of the needs below and above
+        i = c.robot
+        assert c.published.need_below == max(need_of(d) for d in ctrls[: i + 1])
+        assert c.published.need_above == max(need_of(d) for d in ctrls[i:])
+        assert c.patrol.team_passes == passes
+
+    # the root dies: robot 1 no longer has a lower neighbour (its last state is still
+    # at hand, but membership says it is gone) and becomes the root
+    before = history[-1][0]
+    dead, ctrls = ctrls[0].published, ctrls[1:]
+    m = len(ctrls)
+    after = lockstep(ctrls, max(50, 2 * m + 5), dead_lower=dead)
+    assert ctrls[0].lo == 0.0  # it took over the dead robot's segment
+    assert_copies_with_lag(after, 0)
+    for t in range(m - 1, len(after)):  # the new root's passes reach all within n ticks
+        assert {p for p, _ in after[t]} == {after[t][0][0]}, t
+    passes, cycle = after[-1][0]
+    longest = max(c.hi - c.lo for c in ctrls)
+    assert passes * cfg.max_spacing_m >= longest - 1e-9
+    assert passes == passes_for(longest, cfg.max_spacing_m, cfg.passes_per_sweep, before[0])
+    # the dead robot's need is forgotten along the chain
+    live_max = max(need_of(c) for c in ctrls)
+    assert ctrls[0].published.need_above == live_max
+    assert all(c.published.need_below <= live_max for c in ctrls)
+    target = cycle_for(live_max, passes, margin)
+    cycles = [row[0][1] for row in after[m - 1:]]
+    if target >= before[1]:  # a harder need: taken at once
+        assert cycles == pytest.approx([target] * len(cycles), rel=1e-12)
+    else:  # an easier one: the new root goes on from the old cycle, down slowly
+        assert all(target < b <= a <= before[1] for a, b in zip(cycles, cycles[1:], strict=False))
+        assert cycles[-1] > target + 0.5 * (before[1] - target)
+
+
+@settings(max_examples=6, deadline=None)
+@given(st.integers(2, 12), st.floats(0.0, 1.0), st.floats(1.0, 3.0), st.data())
+def test_when_the_hardest_segment_gets_easier_the_chain_slows_down_together(n, at, deep, data):
+    """One robot's segment holds the only deep column; it measures it again and finds
+    it shallow. The chain forgets that need within n ticks, and the root's cycle comes
+    down slowly from where it was, the chain following it one tick per robot."""
+    length = data.draw(st.floats(max(3.0, 0.6 * n), 30.0), label="length")
+    j = min(n - 1, int(at * n))
+    samples = [None] * n
+    samples[j] = (0.5, deep)  # mid-segment: no neighbour's segment holds that bin
+    ctrls = make_team(n, length, samples)
+    margin = FROZEN.cycle_margin
+    history = lockstep(ctrls, 2 * n + 5)
+    passes, before = history[-1][0]
+    assert before == pytest.approx(cycle_for(need_of(ctrls[j]), passes, margin), rel=1e-12)
+    c = ctrls[j]
+    hardest = need_of(c)
+    for _ in range(3):  # two of the last three samples outvote the deep one
+        c.depth_map.record(c.lo + 0.5 * (c.hi - c.lo), c.patrol.config.min_depth_m)
+    needs = [need_of(c) for c in ctrls]
+    assert max(needs) < hardest  # the team's need came down
+    target = cycle_for(max(needs), passes, margin)
+    after = lockstep(ctrls, 60)
+    assert_copies_with_lag(after, 0)
+    assert all(p == passes for row in after for p, _ in row)
+    for c in ctrls:
+        i = c.robot
+        assert (c.published.need_below, c.published.need_above) == (
+            max(needs[: i + 1]), max(needs[i:]))
+    root = [row[0][1] for row in after]
+    assert all(target < b <= a <= before for a, b in zip(root, root[1:], strict=False))
+    assert root[-1] < before  # it does come down,
+    assert root[-1] > target + 0.5 * (before - target)  # but not at once
