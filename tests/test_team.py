@@ -12,6 +12,8 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from agent.controller import Controller, Gains, Neighbour, initial_segment
+from agent.patrol import DepthMap, Patrol, PatrolConfig
+from agent.phase import leg_speed, position_to_phase
 from agent.team import ChainMax, TeamRate, chain_max, cycle_for, passes_for, team_max
 
 needs_st = st.lists(st.floats(0.01, 1000.0), min_size=2, max_size=20)
@@ -41,6 +43,7 @@ def exact_maxima(needs: list[float]) -> list[ChainMax]:
 # --- 1. chain maxima ---------------------------------------------------------------
 
 
+@settings(max_examples=50)
 @given(needs_st)
 def test_every_robot_knows_the_team_maximum_after_one_round_per_robot(needs):
     n = len(needs)
@@ -51,6 +54,7 @@ def test_every_robot_knows_the_team_maximum_after_one_round_per_robot(needs):
     assert state == exact_maxima(needs)  # what each publishes: below / above itself
 
 
+@settings(max_examples=50)
 @given(needs_st)
 def test_the_maximum_travels_one_robot_per_round_and_no_faster(needs):
     """A unique maximum at robot 0 reaches robot n-1 at round n, not before: the
@@ -64,6 +68,7 @@ def test_the_maximum_travels_one_robot_per_round_and_no_faster(needs):
         assert [s == needs[0] for s in seen] == [i < r for i in range(n)]
 
 
+@settings(max_examples=50)
 @given(needs_st, st.data())
 def test_a_need_that_leaves_the_chain_is_forgotten_within_n_rounds(needs, data):
     n = len(needs)
@@ -128,6 +133,7 @@ lengths = st.floats(0.01, 100.0)
 spacings = st.floats(0.02, 2.0)
 
 
+@settings(max_examples=50)
 @given(lengths, spacings, st.integers(1, 60),
        st.none() | st.integers(1, 400), st.floats(0.0, 0.5))
 def test_passes_never_too_few_nor_too_far_apart(longest, spacing, min_passes, current, hyst):
@@ -139,6 +145,7 @@ def test_passes_never_too_few_nor_too_far_apart(longest, spacing, min_passes, cu
                     longest / ((1 - hyst) * spacing) + 1 + 1e-9)
 
 
+@settings(max_examples=50)
 @given(lengths, spacings, st.integers(1, 60))
 def test_passes_from_scratch_are_the_fewest_that_fit(longest, spacing, min_passes):
     p = passes_for(longest, spacing, min_passes)
@@ -146,6 +153,7 @@ def test_passes_from_scratch_are_the_fewest_that_fit(longest, spacing, min_passe
         assert longest / (p - 1) > spacing * (1 - 1e-9)
 
 
+@settings(max_examples=50)
 @given(st.integers(0, 2**32 - 1), st.integers(1, 40), st.integers(0, 40), spacings)
 def test_a_length_hovering_at_a_threshold_does_not_flip_the_passes(seed, min_passes, k, spacing):
     """A random walk within +-1 % of k + min_passes passes' worth of spacing, 1000 steps:
@@ -170,6 +178,7 @@ def test_without_hysteresis_that_length_would_flip_every_step():
     assert hyst == [21] * 6
 
 
+@settings(max_examples=50)
 @given(st.integers(1, 40), st.integers(0, 40), spacings, st.floats(0.0, 0.4),
        st.floats(0.001, 0.9))
 def test_passes_drop_only_once_the_length_is_well_below(min_passes, k, spacing, hyst, drop):
@@ -203,6 +212,7 @@ def test_cycle_is_two_arcs_a_pass_with_the_margin():
 cycles = st.floats(1.0, 200.0)
 
 
+@settings(max_examples=50)
 @given(cycles, st.floats(1.0001, 10.0), st.floats(0.01, 0.5))
 def test_the_rate_rises_at_once(start, ratio, dt):
     rate = TeamRate()
@@ -304,7 +314,7 @@ def assert_copies_with_lag(history, since: int) -> None:
                 assert history[t][i] == history[t - i][0], (t, i)
 
 
-@settings(max_examples=8, deadline=None)
+@settings(max_examples=6, deadline=None)
 @given(teams())
 @example((20, 30.0, [None] * 19 + [(0.5, 3.0)]))  # the hardest segment furthest away
 @example((2, 30.0, [(0.5, 0.3), (0.5, 2.0)]))  # 15 m segments: more than the minimum
@@ -326,8 +336,9 @@ def test_a_chain_of_controllers_agrees_on_the_roots_passes_and_cycle(team):
     assert passes * cfg.max_spacing_m >= longest - 1e-9
     assert passes == passes_for(longest, cfg.max_spacing_m, cfg.passes_per_sweep)
     assert cycle > 0
-    assert cycle == pytest.approx(cycle_for(max(need_of(c) for c in ctrls), passes, margin),
-                                  rel=1e-12)
+    max_need = max(need_of(c) for c in ctrls)
+    assert cycle == pytest.approx(cycle_for(max_need, passes, margin), rel=1e-12)
+    assert cycle == pytest.approx(2 * passes * max_need * margin, rel=1e-12)
     for c in ctrls:  # what each publishes: the chain maxima of the needs below and above
         i = c.robot
         assert c.published.need_below == max(need_of(d) for d in ctrls[: i + 1])
@@ -354,8 +365,10 @@ def test_a_chain_of_controllers_agrees_on_the_roots_passes_and_cycle(team):
     assert all(c.published.need_below <= live_max for c in ctrls)
     target = cycle_for(live_max, passes, margin)
     cycles = [row[0][1] for row in after[m - 1:]]
-    if target >= before[1]:  # a harder need: taken at once
+    if target >= before[1]:  # a harder need: taken at once, and agreed within n ticks
         assert cycles == pytest.approx([target] * len(cycles), rel=1e-12)
+        for t in range(m - 1, len(after)):
+            assert after[t] == [after[t][0]] * m, t
     else:  # an easier one: the new root goes on from the old cycle, down slowly
         assert all(target < b <= a <= before[1] for a, b in zip(cycles, cycles[1:], strict=False))
         assert cycles[-1] > target + 0.5 * (before[1] - target)
@@ -394,3 +407,125 @@ def test_when_the_hardest_segment_gets_easier_the_chain_slows_down_together(n, a
     assert all(target < b <= a <= before for a, b in zip(root, root[1:], strict=False))
     assert root[-1] < before  # it does come down,
     assert root[-1] > target + 0.5 * (before - target)  # but not at once
+
+
+# --- 5. pass geometry -------------------------------------------------------------------
+
+CFG = PatrolConfig()
+V_MAX, WHEEL_BASE = 0.5, 0.26
+los, seg_lengths, team_passes = st.floats(0.0, 20.0), st.floats(0.3, 15.0), st.integers(1, 100)
+
+
+def patrol_on(lo: float, passes: int) -> Patrol:
+    patrol = Patrol(CFG, DepthMap(0.0, CFG.bin_m, CFG.min_depth_m), x=lo)
+    patrol.passes = passes  # as latched at the start of a sweep
+    return patrol
+
+
+@settings(max_examples=50)
+@given(los, seg_lengths, team_passes)
+def test_the_passes_split_the_segment_exactly_and_step_the_phase_by_pi_over_passes(
+        lo, length, passes):
+    hi = lo + length
+    patrol = patrol_on(lo, passes)
+    spacing = patrol.spacing(lo, hi)
+    assert spacing * passes == pytest.approx(hi - lo, rel=1e-14, abs=0)  # no clamp
+    lines = [lo + j * spacing for j in range(passes + 1)]
+    assert lines[-1] == pytest.approx(hi, rel=1e-14, abs=0)
+    step = math.pi / passes
+    up = [position_to_phase(x, lo, hi, 1) for x in lines]
+    down = [position_to_phase(x, lo, hi, -1) for x in reversed(lines)]
+    for phases in (up, down):  # the phase runs on by pi / passes, whichever the way
+        for a, b in zip(phases, phases[1:], strict=False):
+            assert (b - a) % (2 * math.pi) == pytest.approx(step, abs=1e-9)
+
+
+def test_the_patrol_takes_the_teams_passes_only_at_a_new_sweep():
+    patrol = Patrol(PatrolConfig(passes_per_sweep=4), DepthMap(0.0, 0.1, 0.3), x=1.05)
+    patrol.team_passes = 7
+    while patrol.sweeps == 0:  # this sweep keeps its spacing
+        assert patrol.spacing(1.0, 3.0) == 0.5
+        patrol._start_turn(1.0, 3.0, heading_in=True)
+    assert patrol.passes == 7 and patrol.spacing(1.0, 3.0) == pytest.approx(2.0 / 7)
+
+
+@settings(max_examples=50)
+@given(los, seg_lengths, team_passes, seg_lengths, team_passes)
+def test_an_arc_takes_longer_the_wider_the_spacing(lo, len_a, p_a, len_b, p_b):
+    arcs = []
+    for length, passes in ((len_a, p_a), (len_b, p_b)):
+        patrol = patrol_on(lo, passes)
+        arcs.append((patrol.spacing(lo, lo + length),
+                     patrol.arc_time_s(lo, lo + length, V_MAX, WHEEL_BASE)))
+    arcs.sort()
+    (s_a, t_a), (s_b, t_b) = arcs
+    assert 0 < t_a <= t_b
+    # strictly so between the tightest and the widest arc the patrol makes
+    lo_r, hi_r = CFG.min_turn_radius_m, 2 * CFG.max_turn_radius_m
+    if lo_r < s_a < s_b < hi_r:
+        assert t_a < t_b
+        assert t_b - t_a == pytest.approx(math.pi * 0.5 * (s_b - s_a) / V_MAX)
+
+
+@settings(max_examples=50)
+@given(los, seg_lengths, team_passes, st.floats(0.0, 1.0), st.floats(0.0, 1.0),
+       st.floats(CFG.min_depth_m, 4.0), st.floats(0.001, 2.0))
+def test_the_pass_need_grows_with_the_deepest_depth(lo, length, passes, at_a, at_b,
+                                                    depth, deeper):
+    hi = lo + length
+    patrol = patrol_on(lo, passes)
+    need = patrol.pass_need_s(lo, hi, V_MAX, WHEEL_BASE)
+    assert need > patrol.arc_time_s(lo, hi, V_MAX, WHEEL_BASE) > 0
+    s_a = lo + at_a * length
+    patrol.depth_map.record(s_a, depth)
+    first = patrol.pass_need_s(lo, hi, V_MAX, WHEEL_BASE)
+    assert first == pytest.approx(need + (depth - CFG.min_depth_m) / V_MAX)
+    s_b = lo + at_b * length
+    if patrol.depth_map.bin_of(s_b) == patrol.depth_map.bin_of(s_a):
+        s_b = s_a + (CFG.bin_m if at_a < 0.5 else -CFG.bin_m)  # another bin
+    patrol.depth_map.record(s_b, depth + deeper)  # a deeper column
+    second = patrol.pass_need_s(lo, hi, V_MAX, WHEEL_BASE)
+    assert second > first
+    assert second == pytest.approx(first + deeper / V_MAX)
+    mid = lo + 0.5 * length
+    dm = patrol.depth_map
+    if dm.bin_of(mid) not in (dm.bin_of(s_a), dm.bin_of(s_b)):
+        dm.record(mid, CFG.min_depth_m)  # a shallow column changes nothing
+        assert patrol.pass_need_s(lo, hi, V_MAX, WHEEL_BASE) == second
+
+
+# --- 6. leg pacing --------------------------------------------------------------------
+
+
+@settings(max_examples=50)
+@given(st.floats(0.01, 5.0), st.floats(0.0, 1.0), st.floats(0.1, 1.0), st.floats(0.05, 1.5),
+       st.floats(0.001, 0.05), st.floats(0.0, 1.0))
+def test_a_paced_leg_ends_exactly_when_its_time_is_up(fast, slow, v_max, measure_ratio,
+                                                      floor, where):
+    """A leg paced at a speed between the floor and v_max covers its fast metres at
+    that speed and its slow ones at the measuring speed in exactly the time left."""
+    v_measure = measure_ratio * v_max  # may be above v_max: then v_max is the cap
+    slow_v = min(v_max, v_measure)
+    want = floor + where * (v_max - floor)  # a speed in [floor, v_max]
+    time_left = fast / want + slow / slow_v
+    v = leg_speed(time_left, fast, slow, False, v_max, v_measure, floor)
+    assert floor <= v <= v_max
+    if floor < v < v_max:
+        assert fast / v + slow / slow_v == pytest.approx(time_left, abs=1e-9)
+        assert v == pytest.approx(want, rel=1e-9)
+
+
+@settings(max_examples=50)
+@given(st.floats(-10.0, 100.0), st.floats(0.0, 5.0), st.floats(0.0, 1.0), st.booleans(),
+       st.floats(0.1, 1.0), st.floats(0.01, 0.1), st.floats(0.001, 0.05))
+def test_leg_speed_is_paced_floored_capped_and_full_once_late(time_left, fast, slow,
+                                                              measuring, v_max, v_measure,
+                                                              floor):
+    v = leg_speed(time_left, fast, slow, measuring, v_max, v_measure, floor)
+    cap = min(v_max, v_measure) if measuring else v_max
+    assert min(floor, cap) <= v <= cap
+    budget = time_left - slow / min(v_max, v_measure)
+    if budget <= 0 or fast <= 0:  # late, or nothing left at speed: as fast as it may
+        assert v == cap
+    elif not measuring and floor < v < v_max:  # paced
+        assert fast / v + slow / min(v_max, v_measure) == pytest.approx(time_left, abs=1e-9)
