@@ -222,9 +222,9 @@ def test_the_rate_rises_at_once(start, ratio, dt):
 
 
 @settings(max_examples=40)
-@given(cycles, st.floats(0.1, 0.95), st.floats(0.02, 0.5))
-def test_the_rate_falls_slowly_without_undershooting(start, ratio, dt):
-    target = start * ratio
+@given(st.floats(1.0, 50.0), st.floats(1.05, 4.0), st.floats(0.05, 0.5))
+def test_the_rate_falls_slowly_without_undershooting(target, ratio, dt):
+    start = target * ratio  # a tick is shorter than any cycle, as it is on the robots
     rate = TeamRate(start)
     gap0 = start - target
     steps = math.ceil(3 * start / dt)
@@ -396,13 +396,14 @@ def test_when_the_hardest_segment_gets_easier_the_chain_slows_down_together(n, a
     needs = [need_of(c) for c in ctrls]
     assert max(needs) < hardest  # the team's need came down
     target = cycle_for(max(needs), passes, margin)
-    after = lockstep(ctrls, 60)
-    assert_copies_with_lag(after, 0)
-    assert all(p == passes for row in after for p, _ in row)
-    for c in ctrls:
+    after = lockstep(ctrls, n)
+    for c in ctrls:  # the old need is gone from every robot's chain maxima
         i = c.robot
         assert (c.published.need_below, c.published.need_above) == (
             max(needs[: i + 1]), max(needs[i:]))
+    after += lockstep(ctrls, 60 - n)
+    assert_copies_with_lag(after, 0)
+    assert all(p == passes for row in after for p, _ in row)
     root = [row[0][1] for row in after]
     assert all(target < b <= a <= before for a, b in zip(root, root[1:], strict=False))
     assert root[-1] < before  # it does come down,
@@ -480,15 +481,16 @@ def test_the_pass_need_grows_with_the_deepest_depth(lo, length, passes, at_a, at
     patrol.depth_map.record(s_a, depth)
     first = patrol.pass_need_s(lo, hi, V_MAX, WHEEL_BASE)
     assert first == pytest.approx(need + (depth - CFG.min_depth_m) / V_MAX)
+    dm = patrol.depth_map
     s_b = lo + at_b * length
-    if patrol.depth_map.bin_of(s_b) == patrol.depth_map.bin_of(s_a):
-        s_b = s_a + (CFG.bin_m if at_a < 0.5 else -CFG.bin_m)  # another bin
-    patrol.depth_map.record(s_b, depth + deeper)  # a deeper column
+    if dm.bin_of(s_b) == dm.bin_of(s_a):  # another column: the middle of another bin
+        centres = [(b + 0.5) * CFG.bin_m for b in range(dm.bin_of(lo), dm.bin_of(hi) + 1)]
+        s_b = next(x for x in centres if lo <= x <= hi and dm.bin_of(x) != dm.bin_of(s_a))
+    dm.record(s_b, depth + deeper)  # a deeper column
     second = patrol.pass_need_s(lo, hi, V_MAX, WHEEL_BASE)
     assert second > first
     assert second == pytest.approx(first + deeper / V_MAX)
     mid = lo + 0.5 * length
-    dm = patrol.depth_map
     if dm.bin_of(mid) not in (dm.bin_of(s_a), dm.bin_of(s_b)):
         dm.record(mid, CFG.min_depth_m)  # a shallow column changes nothing
         assert patrol.pass_need_s(lo, hi, V_MAX, WHEEL_BASE) == second
