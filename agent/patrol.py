@@ -109,6 +109,7 @@ class DepthMap:
     # boundary just handed over) takes the neighbour's value, not its nearest own bin's.
     shared: dict[int, float] = field(default_factory=dict)
     crossings: dict[int, list[float]] = field(default_factory=dict)  # edge y per bin
+    version: int = 0  # counts the changes of depths and shared, for what caches them
 
     def bin_of(self, s: float) -> int:
         return int(math.floor((s - self.edge_lo) / self.bin_m))
@@ -133,6 +134,7 @@ class DepthMap:
         if len(ordered) >= 3:
             ordered = ordered[1:-1]
         self.depths[b] = sum(ordered) / len(ordered)
+        self.version += 1
         self.recorded += 1
         if kind > SUSPECT:
             self.last_seen[b] = self.recorded
@@ -159,7 +161,9 @@ class DepthMap:
     def learn(self, depths: tuple[tuple[int, float], ...]) -> None:
         """A neighbour's published depths of the bins near its ends."""
         for b, depth in depths:
-            self.shared[b] = depth
+            if self.shared.get(b) != depth:
+                self.shared[b] = depth
+                self.version += 1
 
     def near_ends(self, lo: float, hi: float, reach_m: float) -> tuple[tuple[int, float], ...]:
         """This robot's own measured depths of the bins within ``reach_m`` of either end
@@ -275,6 +279,7 @@ class Patrol:
         # lines all lie on one grid.
         self.passes = config.passes_per_sweep
         self.team_passes = config.passes_per_sweep
+        self._deepest: tuple[tuple[int, int, int] | None, float] = (None, 0.0)  # a cache
         self.turned = 0.0  # rotation so far in the current arc, rad
         self.prev_theta: float | None = None
         self.last_depth: float | None = None
@@ -437,9 +442,12 @@ class Patrol:
         """The deepest patrol depth known in [lo, hi] (own or shared), else the minimum."""
         dm = self.depth_map
         first, last = dm.bin_of(lo), dm.bin_of(hi)
-        values = [d for b, d in dm.depths.items() if first <= b <= last]
-        values += [d for b, d in dm.shared.items() if first <= b <= last]
-        return max(values, default=self.config.min_depth_m)
+        key = (dm.version, first, last)
+        if self._deepest[0] != key:
+            values = [d for b, d in dm.depths.items() if first <= b <= last]
+            values += [d for b, d in dm.shared.items() if first <= b <= last]
+            self._deepest = (key, max(values, default=self.config.min_depth_m))
+        return self._deepest[1]
 
     def to_go(self, y: float, lo: float, hi: float) -> tuple[float, float]:
         """What is left of this straight leg as the map expects it: (metres at full

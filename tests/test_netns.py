@@ -38,10 +38,11 @@ pytestmark = pytest.mark.skipif(REASON is not None, reason=REASON or "")
 ROBOTS = 3
 PORT = 7447
 LEASE_S = 1.0
-CUT_AT_S, REJOIN_AT_S, DURATION_S = 45.0, 55.0, 80.0  # simulated (= wall) time
+CUT_AT_S, REJOIN_AT_S, DURATION_S = 55.0, 65.0, 90.0  # simulated (= wall) time
 DELAY_MS, LOSS = 50.0, 0.05
 # Phase balance on bare ice converges within a patrol cycle, so a run fits the test's
-# time; 4 passes per sweep and an 80 s cycle leave the robots room to catch up. In
+# time; an 80 s cycle and at least 4 passes per sweep (the team makes 7 on its 2 m
+# segments: agent.team keeps passes within 0.3 m) leave the robots room to catch up. In
 # wall-clock time the world does not wait, so neither do the agents: each uses its
 # neighbours' latest states (waiting for the previous tick's, as in lockstep, stalls
 # the agents once the robot-to-robot latency nears the 0.1 s tick).
@@ -200,8 +201,8 @@ def teams(tmp_path_factory):
     return {t.name: t for t in both}
 
 
-# The phase moves one pass at a time (agent.phase.pass_speed): with 4 passes a step is
-# 0.63 rad (the 0.4 m widest pass), and on the impaired link robots step up to a few
+# The phase moves one pass at a time (agent.phase): with 7 passes a step is 0.45 rad,
+# and on the impaired link robots step up to a few
 # ticks apart, so the smoothed worst pair settles at 0.05-0.22 rad (measured over seven
 # runs) where the clean team's settles at 0.05-0.07. The impaired team must converge
 # to within half a step; the clean one to the report's band.
