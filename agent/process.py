@@ -1,8 +1,10 @@
 """``btrack agent``: one robot's controller as its own process.
 
 It hears its own robot (sense, pose) and the states of its two neighbours (the
-nearest live lower and higher ids, from Zenoh liveliness), runs the control core
-once per tick and publishes its state and its robot's command. Malformed messages
+nearest live lower and higher ids, from Zenoh liveliness), feeds what it hears to
+the membership core (agent.membership), which decides whether each tick acts, waits
+or stands still, runs the control core and publishes its state and its robot's
+command. Malformed messages
 are counted and dropped; nothing on the bus can kill it.
 """
 
@@ -23,15 +25,13 @@ from typing import Any
 import zenoh
 
 from agent import config as agent_config
-from agent.controller import Controller, Neighbour, initial_segment
-from agent.partition import SegmentView, join_segment
+from agent.controller import Controller, Neighbour
+from agent.membership import HISTORY, Decision, Membership
 from agent.stability import check_gains
 from wire import AgentState, Cmd, DecodeError, Keys, Pose, Sense, decode, encode
 from wire.session import add_session_args, declare_publisher, open_session, options_from_args
 
-HISTORY = 8  # neighbour states kept per neighbour, by tick
 DEFAULT_LEASE_S = 1.0  # lease an agent announces unless told otherwise
-JOIN_WAIT_S = 1.0  # longest a joining agent stands still for its neighbours' states
 MEMBERS_TIMEOUT_S = 2.0  # how long the start-up question "who is alive?" may take
 
 
@@ -61,34 +61,28 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 class AgentNode:
-    """The shell around one Controller: subscriptions, membership, the tick loop."""
+    """The shell around one Controller and its Membership: subscriptions, the tick loop."""
 
     def __init__(self, session: zenoh.Session, keys: Keys, robot: int, team: int,
                  gains: Any, patrol: Any, limits: Any, neighbour_timeout: float):
         self.session = session
         self.keys = keys
         self.robot = robot
-        self.team = team
         self.gains, self.patrol_cfg, self.limits = gains, patrol, limits
-        self.neighbour_timeout = neighbour_timeout
+        self.membership: Membership[AgentState] = Membership(robot, team, neighbour_timeout)
         # Every message in arrival order; a token in ``wake`` for each wake-up wanted.
         self.inbox: collections.deque[tuple[str, Any]] = collections.deque()
         self.wake: queue.SimpleQueue[None] = queue.SimpleQueue()
         self.waiting = False  # a tick has begun (its Sense is here): anything may finish it
-        self.live: set[int] = set()
-        self.states: dict[int, dict[int, AgentState]] = {}
         self.neighbour_subs: dict[int, Any] = {}
-        self.followed_at: dict[int, int] = {}  # our last tick when we began to hear it
         self.sense: Sense | None = None
         self.pose: Pose | None = None
         # by tick: with hardware a tick's Pose can come after the next tick's Sense
         self.senses: dict[int, Sense] = {}
         self.poses: dict[int, Pose] = {}
-        self.last_k = -1
         self.dropped = 0
         self.ticks = 0
         self.controller: Controller | None = None
-        self.join_deadline: float | None = None  # see _wait_to_join
         self.stopping = False
         self.pub_state = declare_publisher(session, keys.state(robot))
         self.pub_cmd = declare_publisher(session, keys.cmd(robot))
@@ -135,30 +129,21 @@ class AgentNode:
             print(f"agent {self.robot}: dropped message #{self.dropped} on {key}: {why}",
                   file=sys.stderr, flush=True)
 
-    def neighbours(self) -> tuple[int | None, int | None]:
-        lower = max((r for r in self.live if r < self.robot), default=None)
-        upper = min((r for r in self.live if r > self.robot), default=None)
-        return lower, upper
-
     def _follow_neighbours(self) -> None:
         """Subscribe to exactly the current neighbours' state keys."""
-        wanted = {r for r in self.neighbours() if r is not None}
+        wanted = {r for r in self.membership.neighbours() if r is not None}
         for rid in set(self.neighbour_subs) - wanted:
             self.neighbour_subs.pop(rid).undeclare()
-            self.states.pop(rid, None)
-            self.followed_at.pop(rid, None)
         for rid in wanted - set(self.neighbour_subs):
             self.neighbour_subs[rid] = self.session.declare_subscriber(
                 self.keys.state(rid), self._on("state")
             )
-            self.followed_at[rid] = self.last_k
 
     def _handle(self, kind: str, data: Any) -> None:
         if kind == "alive":
             rid, up = data
-            if rid != self.robot:
-                (self.live.add if up else self.live.discard)(rid)
-                self._follow_neighbours()
+            self.membership.alive(rid, up)
+            self._follow_neighbours()
             return
         key, payload = data
         try:
@@ -183,79 +168,27 @@ class AgentNode:
                 state = decode(AgentState, payload)
                 if Keys.robot_of(key) != state.robot:
                     raise DecodeError(f"state of robot {state.robot} on {key}")
-                hist = self.states.setdefault(state.robot, {})
-                hist[state.k] = state
-                for old in [k for k in hist if k < state.k - HISTORY]:
-                    del hist[old]
+                self.membership.heard(state.robot, state.k, state)
         except DecodeError as exc:
             self._drop(key, str(exc))
 
-    def _latest_state(self, rid: int | None, newest_k: int) -> AgentState | None:
-        """A neighbour's latest state of tick ``newest_k`` or before, None if none."""
-        hist = {} if rid is None else self.states.get(rid, {})
-        ks = [kk for kk in hist if kk <= newest_k]
-        return hist[max(ks)] if ks else None
-
     def _neighbour_view(self, rid: int | None, k: int) -> Neighbour | None:
         """The neighbour's state of tick k-1 (or the latest before k if that is missing)."""
-        s = self._latest_state(rid, k - 1)
+        s = self.membership.latest(rid, k - 1)
         if s is None:
             return None
         return Neighbour(s.robot, s.lo, s.hi, s.phase_des, s.workload, s.turns,
                          tuple(zip(s.end_bins, s.end_depths, strict=True)), s.cycle_s,
                          s.passes, s.need_below, s.need_above, s.span_below, s.span_above)
 
-    def _first_segment(self, k: int, edge_lo: float, edge_hi: float) -> tuple[float, float]:
-        """Equal initial segments when the team starts together (tick 0, or no
-        neighbour heard); otherwise a share of the live neighbours' segments."""
-        lower_id, upper_id = self.neighbours()
-        views = [self._latest_segment(rid, k) for rid in (lower_id, upper_id)]
-        if k == 0 or all(v is None for v in views):
-            return initial_segment(self.robot, self.team, edge_lo, edge_hi)
-        return join_segment(views[0], views[1], edge_lo, edge_hi,
-                            lower_unheard=lower_id is not None and views[0] is None,
-                            upper_unheard=upper_id is not None and views[1] is None)
-
-    def _latest_segment(self, rid: int | None, k: int) -> SegmentView | None:
-        """A neighbour's latest state of tick k or before, as a segment: what an agent
-        joining a running team claims a share of. Its state of tick k itself counts:
-        under load a quicker neighbour's state of the tick being decided can be the
-        first one heard of it."""
-        s = self._latest_state(rid, k)
-        return None if s is None else SegmentView(s.lo, s.hi, s.workload)
-
-    def _neighbours_ready(self, k: int) -> bool:
-        """Whether every neighbour's state of tick k-1 is here; on the wall clock, where
-        ticks can be skipped, of our own previous tick if we skipped k-1 (in lockstep
-        that is k-1 itself), or any later one. A neighbour we began to hear only after
-        that tick (one that just became our neighbour) may have published it before we
-        listened: it is not waited for, and this tick acts on what we have (the lockstep
-        must not stall at every membership change). An agent joining a running team
-        waits for its neighbours' states of k-1 or later: it claims a share of them."""
-        need = k - 1 if self.last_k < 0 else min(k - 1, self.last_k)
-        for rid in self.neighbours():
-            if rid is None or self.followed_at.get(rid, -1) >= need:
-                continue
-            if max(self.states.get(rid, {}), default=-1) < need:
-                return False
-        return True
-
-    def _team_heard(self) -> bool:
-        """At tick 0 (a team starting together): whether the neighbours this robot starts
-        with are alive to us, so that it follows them from its first tick. The world
-        starts once it sees every token; each agent may see its neighbours' a little
-        later, and one that had not would treat them as newcomers it need not wait for,
-        and the run would depend on timing."""
-        expected = {r for r in (self.robot - 1, self.robot + 1) if 0 <= r < self.team}
-        return expected <= self.live
-
     def _prune(self, by_tick: dict[int, Any]) -> None:
-        for old in [k for k in by_tick if k <= self.last_k or k < max(by_tick) - HISTORY]:
+        done = self.membership.last_k
+        for old in [k for k in by_tick if k <= done or k < max(by_tick) - HISTORY]:
             del by_tick[old]
 
     def _ready_tick(self) -> int | None:
         """The newest tick after the last one done with both its Sense and its Pose."""
-        ready = [k for k in self.senses if k > self.last_k and k in self.poses]
+        ready = [k for k in self.senses if k > self.membership.last_k and k in self.poses]
         if not ready:
             return None
         k = max(ready)
@@ -278,11 +211,11 @@ class AgentNode:
             print(f"agent {self.robot}: liveliness query failed: {exc}", file=sys.stderr)
 
     def run(self) -> None:
-        deadline: float | None = None
         inbox = self.inbox
         while not self.stopping:
-            self.waiting = any(k > self.last_k for k in self.senses)
+            self.waiting = any(k > self.membership.last_k for k in self.senses)
             if not inbox:
+                deadline = self.membership.deadline
                 timeout = 0.5 if deadline is None else max(0.0, deadline - time.monotonic())
                 try:
                     self.wake.get(timeout=timeout)
@@ -295,36 +228,13 @@ class AgentNode:
                 self._handle(kind, data)
             k = self._ready_tick()
             if k is None:
-                # Keep a running neighbour deadline: with hardware, tick k+1's Sense often
-                # comes before tick k's Pose, and resetting here would wait forever.
                 continue
-            if self.controller is None and k > 0 and self._wait_to_join(k):
+            decision = self.membership.decide(k, time.monotonic())
+            if decision is Decision.STAND_STILL:
                 self._stand_still(k)  # joining a running team: claim once we hear them
-                continue
-            ready = self._neighbours_ready(k) if k > 0 else self._team_heard()
-            if not ready:
-                if deadline is None:
-                    deadline = time.monotonic() + self.neighbour_timeout
-                if time.monotonic() < deadline:
-                    continue
-            deadline = None
-            self._tick(k)
-
-    def _wait_to_join(self, k: int) -> bool:
-        """Whether to stand still rather than claim a segment at tick k of a running
-        team: we know of no other live agent yet (the liveliness history of a session
-        that has just linked up can come after its first Sense: acting then, a restarted
-        agent would think itself alone and claim the whole edge), or some live
-        neighbour's state (of tick k or before) is not here yet; and we have stood still
-        for less than JOIN_WAIT_S (a team starting together on the wall clock has nobody
-        publishing yet; an agent really alone claims the edge after it)."""
-        heard = all(rid is None or self._latest_segment(rid, k) for rid in self.neighbours())
-        if self.live and heard:
-            return False
-        now = time.monotonic()
-        if self.join_deadline is None:
-            self.join_deadline = now + JOIN_WAIT_S
-        return now < self.join_deadline
+            elif decision is Decision.ACT:
+                self._tick(k)
+            # WAIT: a neighbour's state may still come; we wake by membership.deadline
 
     def _stand_still(self, k: int) -> None:
         """Tick k of an agent joining a running team before it has heard its neighbours:
@@ -336,18 +246,17 @@ class AgentNode:
         sense = self.sense
         assert sense is not None
         self.pub_cmd.put(encode(Cmd(t=sense.t, k=k, robot=self.robot, v=0.0, omega=0.0)))
-        self.last_k = k
 
     def _tick(self, k: int) -> None:
         sense, pose = self.sense, self.pose
         assert sense is not None and pose is not None
         if self.controller is None:
-            lo, hi = self._first_segment(k, sense.edge_lo, sense.edge_hi)
+            lo, hi = self.membership.first_segment(k, sense.edge_lo, sense.edge_hi)
             self.controller = Controller(
                 self.robot, lo, hi, sense.edge_lo, sense.edge_hi, pose.x,
                 self.gains, self.patrol_cfg, self.limits,
             )
-        lower_id, upper_id = self.neighbours()
+        lower_id, upper_id = self.membership.neighbours()
         out = self.controller.step(
             sense.dt, pose.x, pose.y, pose.theta, sense.ice, sense.algae,
             self._neighbour_view(lower_id, k), self._neighbour_view(upper_id, k),
@@ -373,7 +282,6 @@ class AgentNode:
         # could come after the neighbour timeout, and the run then depended on timing.)
         self.pub_state.put(encode(state))
         self.pub_cmd.put(encode(Cmd(t=sense.t, k=k, robot=self.robot, v=out.v, omega=out.omega)))
-        self.last_k = k
         self.ticks += 1
 
     def close(self) -> None:

@@ -1,0 +1,254 @@
+"""Membership and joining: one agent's place in the chain, as a pure core.
+
+The shell (``agent.process``) feeds it what it hears: liveliness tokens coming and
+going (``alive``), its neighbours' states (``heard``) and, once its robot's sensing of
+a tick is in, that tick with the wall time (``decide``). It answers who the neighbours
+are (the nearest live lower and higher ids), whether to act on the tick, wait for a
+neighbour's state or stand still, and what segment to claim first. It reads no clock:
+the time is an argument, so every race between liveliness news and states can be
+played here in any order.
+"""
+
+from __future__ import annotations
+
+from enum import Enum
+from typing import Generic, Protocol, TypeVar
+
+from agent.controller import initial_segment
+from agent.partition import SegmentView, join_segment
+
+HISTORY = 8  # neighbour states kept per neighbour, by tick
+JOIN_WAIT_S = 1.0  # longest a joining agent stands still for its neighbours' states, wall s
+
+
+class Segmented(Protocol):
+    """What membership reads of a neighbour's state: its segment and workload."""
+
+    @property
+    def lo(self) -> float: ...
+
+    @property
+    def hi(self) -> float: ...
+
+    @property
+    def workload(self) -> float: ...
+
+
+S = TypeVar("S", bound=Segmented)
+
+
+class Stage(Enum):
+    JOINING = "joining"  # no segment claimed yet: the team's start, or a (re)start mid-run
+    MEMBER = "member"  # has claimed a segment and acts on every tick
+
+
+class Decision(Enum):
+    """What to do with a tick whose sensing is in."""
+
+    WAIT = "wait"  # not yet: a neighbour's previous state may still come (see ``deadline``)
+    STAND_STILL = "stand still"  # a zero command and no state: joining, neighbours unheard
+    ACT = "act"  # step the controller and publish its state
+
+
+# Stage after each decision; a member never stands still (it holds a segment).
+TRANSITIONS: dict[tuple[Stage, Decision], Stage] = {
+    (Stage.JOINING, Decision.WAIT): Stage.JOINING,
+    (Stage.JOINING, Decision.STAND_STILL): Stage.JOINING,
+    (Stage.JOINING, Decision.ACT): Stage.MEMBER,
+    (Stage.MEMBER, Decision.WAIT): Stage.MEMBER,
+    (Stage.MEMBER, Decision.ACT): Stage.MEMBER,
+}
+
+
+class Membership(Generic[S]):
+    """Robot ``robot`` of a team started as ``team`` robots: its live peers, its
+    neighbours' recent states, and the decision for each tick.
+
+    ``neighbour_timeout_s`` is how long (wall s) a tick waits for a live neighbour's
+    previous state before acting without it; ``join_wait_s`` how long an agent joining
+    a running team stands still for its neighbours before it claims without them.
+    Ids outside ``team`` count as live peers like any other (a robot added to a
+    running team has an id past the size the others were started with)."""
+
+    def __init__(self, robot: int, team: int, neighbour_timeout_s: float = 1.0,
+                 join_wait_s: float = JOIN_WAIT_S):
+        if not 0 <= robot < team:
+            raise ValueError(f"robot id {robot} outside a team of {team}")
+        self.robot = robot
+        self.team = team
+        self.neighbour_timeout_s = neighbour_timeout_s
+        self.join_wait_s = join_wait_s
+        self._live: set[int] = set()
+        self._states: dict[int, dict[int, S]] = {}  # by neighbour, by tick
+        self._followed_at: dict[int, int] = {}  # by neighbour: our last tick when it became one
+        self._stage = Stage.JOINING
+        self._last_k = -1  # the last tick acted on or stood still on
+        self._deadline: float | None = None  # until when a tick waits (see ``decide``)
+        self._join_deadline: float | None = None  # until when a joining agent stands still
+
+    # -- what it is told --------------------------------------------------------------
+
+    def alive(self, robot: int, up: bool) -> None:
+        """Robot ``robot``'s liveliness token appeared (``up``) or vanished. A frozen
+        agent's vanishes when its lease runs out and appears again when it thaws. When
+        this changes the neighbours, a new neighbour's history starts empty and one that
+        is no longer a neighbour is forgotten."""
+        if robot == self.robot:
+            return
+        if up:
+            self._live.add(robot)
+        else:
+            self._live.discard(robot)
+        wanted = {r for r in self.neighbours() if r is not None}
+        for rid in set(self._followed_at) - wanted:
+            del self._followed_at[rid]
+            del self._states[rid]
+        for rid in wanted - set(self._followed_at):
+            self._followed_at[rid] = self._last_k
+            self._states[rid] = {}
+
+    def heard(self, robot: int, k: int, state: S) -> bool:
+        """Neighbour ``robot``'s state of its tick ``k``; whether it was kept. A state of a
+        robot that is not a neighbour (one sent before it stopped being one) is not."""
+        hist = self._states.get(robot)
+        if hist is None:
+            return False
+        hist[k] = state
+        for old in [kk for kk in hist if kk < k - HISTORY]:
+            del hist[old]
+        return True
+
+    def decide(self, k: int, now: float) -> Decision:
+        """Tick ``k``'s sensing is in (a tick after the last one done) at wall time
+        ``now``: act on it, wait for a neighbour's state, or stand still. Acting or
+        standing still makes ``k`` the last tick done.
+
+        A joining agent past tick 0 stands still while ``must_stand_still``. Otherwise a
+        tick acts once its neighbours are heard (``neighbours_heard``; at tick 0
+        ``team_heard``), or once it has waited ``neighbour_timeout_s`` since it began to
+        wait (a wait that lasts over ticks, as with hardware, where tick k+1's sensing
+        often comes before tick k's pose, keeps its deadline)."""
+        if k <= self._last_k:
+            raise ValueError(f"tick {k} is not after the last tick done, {self._last_k}")
+        if self._stage is Stage.JOINING and k > 0 and self.must_stand_still(k, now):
+            return self._enter(Decision.STAND_STILL, k)
+        heard = self.neighbours_heard(k) if k > 0 else self.team_heard()
+        if not heard:
+            if self._deadline is None:
+                self._deadline = now + self.neighbour_timeout_s
+            if now < self._deadline:
+                return self._enter(Decision.WAIT, k)
+        return self._enter(Decision.ACT, k)
+
+    def _enter(self, decision: Decision, k: int) -> Decision:
+        self._stage = TRANSITIONS[(self._stage, decision)]
+        if decision is not Decision.WAIT:
+            self._last_k = k
+        if decision is Decision.ACT:
+            self._deadline = None
+        return decision
+
+    # -- what it answers --------------------------------------------------------------
+
+    @property
+    def stage(self) -> Stage:
+        return self._stage
+
+    @property
+    def last_k(self) -> int:
+        """The last tick acted on or stood still on; -1 before the first."""
+        return self._last_k
+
+    @property
+    def live(self) -> frozenset[int]:
+        """The other robots whose liveliness tokens are up."""
+        return frozenset(self._live)
+
+    @property
+    def deadline(self) -> float | None:
+        """The wall time at which a waiting tick acts without its neighbours' states
+        (the shell wakes then to ask again); None while no tick waits."""
+        return self._deadline
+
+    @property
+    def join_deadline(self) -> float | None:
+        """The wall time at which a joining agent stops standing still for its
+        neighbours; None until it first stood still."""
+        return self._join_deadline
+
+    def neighbours(self) -> tuple[int | None, int | None]:
+        """The nearest live lower and higher ids (None at an end of the chain)."""
+        lower = max((r for r in self._live if r < self.robot), default=None)
+        upper = min((r for r in self._live if r > self.robot), default=None)
+        return lower, upper
+
+    def latest(self, robot: int | None, newest_k: int) -> S | None:
+        """Neighbour ``robot``'s latest state of tick ``newest_k`` or before, None if none."""
+        hist = {} if robot is None else self._states.get(robot, {})
+        ks = [kk for kk in hist if kk <= newest_k]
+        return hist[max(ks)] if ks else None
+
+    def latest_segment(self, robot: int | None, k: int) -> SegmentView | None:
+        """A neighbour's latest state of tick k or before, as a segment: what an agent
+        joining a running team claims a share of. Its state of tick k itself counts:
+        under load a quicker neighbour's state of the tick being decided can be the
+        first one heard of it."""
+        s = self.latest(robot, k)
+        return None if s is None else SegmentView(s.lo, s.hi, s.workload)
+
+    def first_segment(self, k: int, edge_lo: float, edge_hi: float) -> tuple[float, float]:
+        """The segment to claim on acting first, at tick ``k``: equal initial segments
+        when the team starts together (tick 0, or no neighbour heard); otherwise a share
+        of the live neighbours' latest segments (``join_segment``), never past a live
+        neighbour not heard yet."""
+        lower_id, upper_id = self.neighbours()
+        views = [self.latest_segment(rid, k) for rid in (lower_id, upper_id)]
+        if k == 0 or all(v is None for v in views):
+            return initial_segment(self.robot, self.team, edge_lo, edge_hi)
+        return join_segment(views[0], views[1], edge_lo, edge_hi,
+                            lower_unheard=lower_id is not None and views[0] is None,
+                            upper_unheard=upper_id is not None and views[1] is None)
+
+    # -- guards -----------------------------------------------------------------------
+
+    def must_stand_still(self, k: int, now: float) -> bool:
+        """Whether a joining agent stands still rather than claim a segment at tick k of
+        a running team: it knows of no other live agent yet (the liveliness history of a
+        session that has just linked up can come after its first sensing: acting then,
+        a restarted agent would think itself alone and claim the whole edge), or some
+        live neighbour's state (of tick k or before) is not here yet; and it has stood
+        still for less than ``join_wait_s`` (a team starting together on the wall clock
+        has nobody publishing yet; an agent really alone claims the edge after it).
+        The wait begins the first time this is asked with something missing."""
+        heard = all(rid is None or self.latest(rid, k) is not None
+                    for rid in self.neighbours())
+        if self._live and heard:
+            return False
+        if self._join_deadline is None:
+            self._join_deadline = now + self.join_wait_s
+        return now < self._join_deadline
+
+    def neighbours_heard(self, k: int) -> bool:
+        """Whether every neighbour's state of tick k-1 is here; on the wall clock, where
+        ticks can be skipped, of our own previous tick if we skipped k-1 (in lockstep
+        that is k-1 itself), or any later one. A neighbour we began to hear only after
+        that tick (one that just became our neighbour) may have published it before we
+        listened: it is not waited for, and this tick acts on what we have (the lockstep
+        must not stall at every membership change). An agent joining a running team
+        waits for its neighbours' states of k-1 or later: it claims a share of them."""
+        need = k - 1 if self._last_k < 0 else min(k - 1, self._last_k)
+        for rid in self.neighbours():
+            if rid is None or self._followed_at[rid] >= need:
+                continue
+            if max(self._states[rid], default=-1) < need:
+                return False
+        return True
+
+    def team_heard(self) -> bool:
+        """At tick 0 (a team starting together): whether the neighbours this robot starts
+        with are alive to us, so that it follows them from its first tick. The world
+        starts once it sees every token; each agent may see its neighbours' a little
+        later, and one that had not would treat them as newcomers it need not wait for,
+        and the run would depend on timing."""
+        expected = {r for r in (self.robot - 1, self.robot + 1) if 0 <= r < self.team}
+        return expected <= self._live
