@@ -458,21 +458,33 @@ def edge_points(edge_lo: float, edge_hi: float, step: float = 0.1) -> np.ndarray
 
 
 def sweep_rate(
-    tracks: Sequence[tuple[np.ndarray, np.ndarray]], t_from: float, t_to: float
+    tracks: Sequence[tuple[np.ndarray, np.ndarray]], t_from: float, t_to: float,
+    sweeps: Sequence[tuple[np.ndarray, np.ndarray]] | None = None,
 ) -> float:
-    """Team along-edge sweep rate: sum over robots of |dx| in [t_from, t_to] / duration.
+    """Team along-edge sweep rate n v over [t_from, t_to]. With each robot's sweeps
+    (``sweeps``: per robot the times and directions of travel its agent published), the
+    distance along the edge between its reversals (and the window's ends), so that a
+    leg's wobble about its pass line, which goes nowhere along the edge, is not counted
+    as patrol (on short segments it doubled the sum); without them, the sum of |dx|.
     ``tracks`` holds one (t, x) per robot."""
     duration = t_to - t_from
     if duration <= 0:
         return math.nan
     total = 0.0
-    for t, x in tracks:
+    for j, (t, x) in enumerate(tracks):
         t = np.asarray(t, dtype=float)
         x = np.asarray(x, dtype=float)
-        sel = (t >= t_from) & (t <= t_to)
-        if sel.sum() >= 2:
-            step = np.diff(x[sel])
-            total += float(np.abs(step[np.isfinite(step)]).sum())
+        sel = (t >= t_from) & (t <= t_to) & np.isfinite(x)
+        if sel.sum() < 2:
+            continue
+        ts, xs = t[sel], x[sel]
+        if sweeps is not None and np.asarray(sweeps[j][0]).size >= 2:
+            st, sd = (np.asarray(v, dtype=float) for v in sweeps[j])
+            flips = st[1:][sd[1:] != sd[:-1]]
+            at = np.concatenate([[ts[0]], flips[(flips > ts[0]) & (flips < ts[-1])], [ts[-1]]])
+            total += float(np.abs(np.diff(np.interp(at, ts, xs))).sum())
+        else:
+            total += float(np.abs(np.diff(xs)).sum())
     return total / duration
 
 
@@ -768,7 +780,8 @@ def team_measures(
     t_from, t_to = revisit_window(t)
     tracks = [(t, x_live[j], y_live[j], t, direction[j]) for j in range(x.shape[0])]
     _, gaps = visit_gaps(tracks, edge, t_from, t_to)
-    rate = sweep_rate([(t, x_live[j]) for j in range(x.shape[0])], t_from, t_to)
+    rate = sweep_rate([(t, x_live[j]) for j in range(x.shape[0])], t_from, t_to,
+                      [(t, direction[j]) for j in range(x.shape[0])])
     out.update(idleness_measures(gaps, t_from, t_to, rate, edge.length))
     still_from = float(t[0] + (1.0 - last) * (t[-1] - t[0]))
     still = [still_fraction(t, x[j], y[j], still_from, alive[j]) for j in range(x.shape[0])]

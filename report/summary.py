@@ -160,7 +160,8 @@ def revisit(run: RunData, t: np.ndarray) -> Revisit | None:
         sweeps = (st.t, st.direction) if st is not None else (no_states, no_states)
         per_robot.append((tr.t, tr.x, tr.y, *sweeps))
     points, gaps = m.visit_gaps(per_robot, edge, t_from, t_to)
-    rate = m.sweep_rate([(tr.t, tr.x) for tr in tracks.values()], t_from, t_to)
+    rate = m.sweep_rate([(tr.t, tr.x) for tr in tracks.values()], t_from, t_to,
+                        [(r[3], r[4]) for r in per_robot])
     return Revisit(points, gaps, t_from, t_to, rate, edge.length)
 
 

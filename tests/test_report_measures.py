@@ -203,6 +203,21 @@ def test_revisit_on_a_synthetic_sweep() -> None:
     assert m.ideal_revisit(2.0, rate) == pytest.approx(4.0, rel=0.01)
 
 
+def test_sweep_rate_counts_progress_along_the_edge_not_a_legs_wobble() -> None:
+    """A robot sweeping 0 -> 2 -> 0 m every 8 s (0.5 m/s along the edge) whose x
+    wobbles by 10 cm at 1.5 Hz about its path: the wobble goes nowhere, so with the
+    robot's directions the rate is the sweep's; without them the sum of |dx| counts the
+    wobble too."""
+    t = np.arange(0.0, 80.0, 0.1)
+    phase = (t % 8.0) / 8.0
+    x = np.where(phase < 0.5, 4.0 * phase, 4.0 * (1.0 - phase))
+    direction = np.where(phase < 0.5, 1.0, -1.0)
+    wobbly = x + 0.1 * np.sin(2 * np.pi * 1.5 * t + 0.3)
+    with_sweeps = m.sweep_rate([(t, wobbly)], 40.0, 79.9, [(t, direction)])
+    assert with_sweeps == pytest.approx(0.5, rel=0.02)
+    assert m.sweep_rate([(t, wobbly)], 40.0, 79.9) > 1.3 * with_sweeps
+
+
 def test_speedup() -> None:
     t = np.arange(0.0, 10.01, 0.1)
     log_ns = (t * 1e9 / 50.0).astype(np.int64) + 123
