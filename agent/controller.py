@@ -137,6 +137,7 @@ class Controller:
         self.turns = 0.0  # phi_des unwrapped: the count of sweeps the pass grid walks by
         self.published: Neighbour | None = None  # what we told the neighbours last tick
         self.rate = TeamRate()  # the cycle, when this robot is the chain's root
+        self._dt = 0.1
         self.passes: int | None = None  # the team's passes per sweep, when known
         self.cycle_s = self.gains.cycle_s
 
@@ -219,6 +220,7 @@ class Controller:
         if before is not None and self.published is not None:
             lag = wrap_pi(before - position_to_phase(x, self.lo, self.hi, self.patrol.direction))
             self.patrol.hurry = lag > HURRY_RAD
+        self._dt = dt
         self.cycle_s, self.passes, chain = self._agree(dt, lower, upper, has_lower, has_upper)
         self.patrol.team_passes = self.passes
         rate = TWO_PI / self.cycle_s
@@ -252,6 +254,17 @@ class Controller:
             direction, steer.motion, self.turns, ends, self.cycle_s, self.passes,
         )
 
+    def _arc_speed(self, steer: Steer) -> float:
+        """Full speed round an arc, but no further on its last tick than onto the leg's
+        heading: at 10 Hz a tight arc turns a third of a radian a tick, and the leg
+        would begin that far off its heading, its line a centimetre or two away, which
+        on a 0.3 m segment is a tenth of a radian of eq. 3.1's phase."""
+        p, lim = self.patrol, self.limits
+        left = p.rotation_left()
+        if left is None or steer.curvature == 0.0:
+            return lim.v_max
+        return min(lim.v_max, max(left, 0.0) / (abs(steer.curvature) * self._dt))
+
     def _speed(self, steer: Steer, phase: float, rate: float, y: float) -> float:
         """Forward speed along the patrol (agent.phase.leg_speed, arc_may_begin): legs
         paced to end when the next arc is due, each arc begun so that its middle falls
@@ -268,7 +281,9 @@ class Controller:
             fast, slow = p.to_go(y, self.lo, self.hi)
             return leg_speed(time_left, fast, slow, steer.measuring, lim.v_max,
                              p.config.measure_speed, p.config.min_leg_speed)
-        if p.turned > 0.05 or self.patrol.hurry or arc_may_begin(
+        if p.turned > 0.05:
+            return self._arc_speed(steer)
+        if self.patrol.hurry or arc_may_begin(
                 self.phase_des, position_to_phase(p.arc_from_x, self.lo, self.hi, p.direction),
                 position_to_phase(p.line_x, self.lo, self.hi, p.direction), lead):
             return lim.v_max

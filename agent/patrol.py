@@ -56,7 +56,7 @@ class PatrolConfig:
     max_search_m: float = 2.0  # how far in to look for the edge before giving up
     passes_per_sweep: int = 16  # at least; the team makes more on long segments
     max_spacing_m: float = 0.3  # passes at most this far apart (a robot's width, about)
-    min_turn_radius_m: float = 0.035
+    min_turn_radius_m: float = 0.01  # a differential drive turns about its inner wheel
     max_turn_radius_m: float = 0.2
     heading_gain: float = 4.0  # curvature per rad of heading error, 1/m
     line_gain: float = 3.0  # heading correction per m off the pass line, rad/m
@@ -513,6 +513,16 @@ class Patrol:
         speed = min(v_max, c.measure_speed)
         legs = [(leg - slow) / v_max + slow / speed for slow in (slow_in, slow_out)]
         return max(legs) + self.arc_time_s(lo, hi, v_max, wheel_base_m)
+
+    def rotation_left(self) -> float | None:
+        """In an arc that has turned past a quarter, the rotation left to the leg's
+        heading (rad; negative once past it); None otherwise."""
+        if self.motion not in (Motion.TURN_UNDER, Motion.TURN_OUT) or self.turned < HALF_PI:
+            return None
+        if self.prev_theta is None:
+            return None
+        heading = -HALF_PI if self.motion is Motion.TURN_UNDER else HALF_PI
+        return self.turn_sign * wrap_pi(heading - self.prev_theta)
 
     def _hold_line(self, x: float, theta: float, heading: float) -> float:
         c = self.config

@@ -87,3 +87,4 @@ class TeamRate:
         else:
             self.cycle_s += (target_s - self.cycle_s) * min(1.0, dt / self.cycle_s)
         return self.cycle_s
+
