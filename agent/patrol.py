@@ -68,6 +68,11 @@ class PatrolConfig:
     edge_zone_m: float = 0.08  # slow down this close before a known edge (ice, algae out)
     turn_margin_m: float = 0.05  # turn under the ice this far past the next pass's algae
     min_leg_speed: float = 0.025  # m/s: legs are paced to the team, never slower than this
+    # Every in-leg goes on to the segment's deepest known depth before it turns, so all
+    # of a robot's passes are as long and its path-length phase runs as its position
+    # phase does; it costs distance, not time (the team's rate is set by the deepest
+    # pass anyway). Off: turn past the algae, as the thesis's patrol.
+    even_legs: bool = True
 
     def __post_init__(self) -> None:
         if self.passes_per_sweep < 1:
@@ -427,6 +432,8 @@ class Patrol:
         if expected is None:
             inside = [d for b, d in dm.depths.items() if dm.bin_of(lo) <= b <= dm.bin_of(hi)]
             expected = max(inside, default=depth)
+        if c.even_legs:  # every leg as deep as the segment's deepest
+            expected = max(expected, self.deepest(lo, hi))
         return min(c.max_depth_m, max(depth, expected + c.turn_margin_m))
 
     def _expected_depth(self, x: float, lo: float, hi: float) -> float:
@@ -458,6 +465,8 @@ class Patrol:
         edge = dm.edge_y(self.x)
         known = dm.depths.get(dm.bin_of(self.x))
         expected = max(c.min_depth_m, self._expected_depth(self.x, lo, hi))
+        if c.even_legs:
+            expected = max(expected, self.deepest(lo, hi))
         turn = expected + c.turn_margin_m
         zones: list[tuple[float, float]] = []
         if self.motion is Motion.ENTER:

@@ -76,8 +76,15 @@ def run_case(case: Case) -> dict[str, Any]:
         t, m.pair_errors({i: tr.phase[i] for i in ids}, pairs, wrap=True))
     seen_work_sse, _ = m.steady_state(
         t, m.pair_errors({i: tr.workload[i] for i in ids}, pairs, wrap=False))
+    edge = m.EdgeModel(gmap.edge_lo, gmap.edge_hi, BIN_M, depth, gmap.edge_y_bins(BIN_M))
+    every = m.team_measures(t, tr.x, tr.y, tr.lo, tr.hi, tr.direction, tr.phase, tr.workload,
+                            edge)
     return {
         "map": case.map, "start": case.start, "seed": case.seed,
+        "phase_path_sse_rad": every["phase_path_sse_rad"],
+        "workload_rel_sse": every["workload_rel_sse"],
+        "revisit_worst_ratio": every["revisit_worst_ratio"],
+        "still_frac_max": every["still_frac_max"],
         "duration_s": case.duration_s,
         "localization": case.localization,
         "phase_sse_rad": phase_sse, "workload_sse_m2": work_sse,
@@ -165,7 +172,9 @@ def main(argv: list[str] | None = None) -> int:
                   f"phase {res['phase_sse_rad']:.4f} rad "
                   f"({times(ratio(res['thesis_phase_sse_rad'], res['phase_sse_rad']))} below)  "
                   f"workload {res['workload_sse_m2']:.4f} m^2 "
-                  f"({times(ratio(res['thesis_workload_sse_m2'], res['workload_sse_m2']))} below)",
+                  f"({times(ratio(res['thesis_workload_sse_m2'], res['workload_sse_m2']))} below)"
+                  f"  path phase {res['phase_path_sse_rad']:.3f} rad, workload "
+                  f"{100 * res['workload_rel_sse']:.2f} %",
                   flush=True)
     for seed in args.seeds if len(args.seeds) > 1 else []:
         print(f"seed {seed}: " + summary([r for r in results if r["seed"] == seed]))

@@ -40,6 +40,7 @@ class EngineCase:
     odom_noise: float = ODOM_NOISE
     odom_turn_noise: float | None = None  # None: as odom_noise (the world's default)
     scale: float = 0.05  # metres per pixel of a PNG map
+    config: str | None = None  # an agent configuration file (TOML), under the overrides
 
 
 @dataclass
@@ -63,7 +64,7 @@ def run(case: EngineCase, gmap: GridMap | None = None) -> tuple[GridMap, Tracks]
     if case.localization not in ("truth", "odometry"):
         raise ValueError(f"the in-process engine takes truth or odometry poses, not "
                          f"{case.localization!r}")
-    gains, patrol, limits = agent_config.load(None, case.overrides)
+    gains, patrol, limits = agent_config.load(case.config, case.overrides)
     gmap = gmap or load_map(case.map, case.scale, seed=case.seed)
     n = case.robots
     world = World(gmap, n, case.start, seed=case.seed, odom_noise=case.odom_noise,

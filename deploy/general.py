@@ -120,7 +120,7 @@ def goals_met(row: dict[str, Any]) -> dict[str, bool]:
 
 
 def run_inprocess(case: GeneralCase, localization: str = "truth",
-                  tracks_dir: str | None = None) -> dict[str, Any]:
+                  tracks_dir: str | None = None, config: str | None = None) -> dict[str, Any]:
     """One case in this process: the row of the table."""
     from deploy.engine import BIN_M, EngineCase, run
     from report.measures import EdgeModel, team_measures
@@ -129,7 +129,7 @@ def run_inprocess(case: GeneralCase, localization: str = "truth",
     began = time.monotonic()
     gmap, tr = run(EngineCase(map=case.map, robots=case.robots, start=case.start,
                               duration_s=case.duration_s, seed=case.seed,
-                              localization=localization))
+                              localization=localization, config=config))
     edge = EdgeModel(gmap.edge_lo, gmap.edge_hi, BIN_M, gmap.patrol_depth_bins(BIN_M),
                      gmap.edge_y_bins(BIN_M), ROBOT_RADIUS_M)
     row = _row(case, team_measures(tr.t, tr.x, tr.y, tr.lo, tr.hi, tr.direction, tr.phase,
@@ -150,14 +150,16 @@ def _row(case: GeneralCase, measures: dict[str, Any]) -> dict[str, Any]:
     return row
 
 
-def _bus_args(case: GeneralCase, out: Path, localization: str) -> list[str]:
+def _bus_args(case: GeneralCase, out: Path, localization: str,
+              config: str | None = None) -> list[str]:
     return [sys.executable, "-m", "btrack", "sim", "--robots", str(case.robots), "--map",
             case.map, "--start", case.start, "--duration", repr(case.duration_s), "--seed",
-            str(case.seed), "--localization", localization, "--out", str(out), "--quiet"]
+            str(case.seed), "--localization", localization, "--out", str(out), "--quiet",
+            *(["--config", config] if config else [])]
 
 
 def run_bus(cases: list[GeneralCase], out: Path, localization: str, jobs: int,
-            progress: Any) -> list[dict[str, Any]]:
+            progress: Any, config: str | None = None) -> list[dict[str, Any]]:
     """Each case a full ``btrack sim`` team, ``jobs`` at once; rows in case order."""
     from deploy.suite import Case, _stop
 
@@ -172,7 +174,8 @@ def run_bus(cases: list[GeneralCase], out: Path, localization: str, jobs: int,
                 sim.out.mkdir(parents=True, exist_ok=True)
                 with open(sim.out / "sim.log", "wb") as log:
                     sim.proc = subprocess.Popen(
-                        _bus_args(case, sim.out, localization), stdin=subprocess.DEVNULL,
+                        _bus_args(case, sim.out, localization, config),
+                        stdin=subprocess.DEVNULL,
                         stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
                 sim.began = time.monotonic()
                 running.append((case, sim))
@@ -238,6 +241,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
                    help="cases at once [the number of cores]")
     p.add_argument("--out", type=Path, help="output directory [runs/general-<time>]")
+    p.add_argument("--config", metavar="FILE.toml",
+                   help="agent configuration for every case, as for btrack sim")
     p.add_argument("--tracks", action="store_true",
                    help="also write each case's true tracks (inprocess: OUT/tracks/)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
@@ -257,6 +262,10 @@ def main(argv: list[str] | None = None) -> int:
         p.error("--localization pf runs the localizer process: use --engine bus")
     try:
         cases = make_cases(args.cases, args.seed, tuple(args.sizes), args.duration)
+        if args.config:
+            from agent import config as agent_config
+
+            agent_config.load(args.config)
     except ValueError as exc:
         p.error(str(exc))
     out: Path = args.out or Path("runs") / time.strftime("general-%Y%m%d-%H%M%S")
@@ -283,10 +292,11 @@ def main(argv: list[str] | None = None) -> int:
         if args.engine == "inprocess":
             ctx = multiprocessing.get_context("spawn")
             with ctx.Pool(min(args.jobs, total)) as pool:
-                work = [(c, args.localization, str(tracks) if tracks else None) for c in cases]
+                work = [(c, args.localization, str(tracks) if tracks else None, args.config)
+                        for c in cases]
                 rows = _ordered(pool, work, progress)
         else:
-            rows = run_bus(cases, out, args.localization, args.jobs, progress)
+            rows = run_bus(cases, out, args.localization, args.jobs, progress, args.config)
     except KeyboardInterrupt as exc:
         code, word = interrupted_code(exc)
         print(f"\nbtrack suite general: {word}; every case stopped", file=sys.stderr)
@@ -295,6 +305,7 @@ def main(argv: list[str] | None = None) -> int:
     rows.sort(key=lambda r: r["index"])
     settings = {"suite": "general", "cases": total, "seed": args.seed, "sizes": args.sizes,
                 "engine": args.engine, "localization": args.localization,
+                "config": args.config,
                 "duration_s": args.duration, "jobs": args.jobs, "wall_s": round(wall, 1)}
     from report.general import write_general_report
 

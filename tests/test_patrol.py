@@ -10,7 +10,7 @@ import statistics
 
 import pytest
 
-from agent.controller import Controller, Neighbour, initial_segment
+from agent.controller import Controller, Gains, Neighbour, initial_segment
 from agent.patrol import PRECISE, ROUGH, DepthMap, Motion, Patrol, PatrolConfig
 from agent.phase import position_to_phase, wrap_pi
 from simworld.maps import load_map
@@ -406,3 +406,50 @@ def test_the_arc_that_begins_a_sweep_steps_at_the_middle_of_its_step():
             ctrl.published, phase_des=middle - early + lead - rate * 0.1)
         out = ctrl.step(0.1, 1.95, -0.4, -math.pi / 2, False, False, None, None, False, True)
         assert (out.v > 0) is moving, (lead, out.phase_des, middle)
+
+
+def test_even_legs_turn_at_the_segments_deepest_depth():
+    """With ``even_legs`` every in-leg goes on to the deepest depth known on the
+    segment before it turns (all of a robot's passes as long); without, past the algae
+    expected under the next line."""
+    reached = {}
+    for even in (False, True):
+        cfg = PatrolConfig(passes_per_sweep=8, even_legs=even)
+        dm = DepthMap(0.0, 0.1, cfg.min_depth_m)
+        for b in range(20):  # the segment [0, 2] known: bare ice but one deep column
+            dm.record(0.1 * b + 0.05, 1.2 if b == 15 else 0.3)
+        patrol = Patrol(cfg, dm, x=0.55)
+        track = unicycle(patrol, lambda x, y: (y >= 0.0, False), 0.55, -0.5, 60)
+        first_turn = next(i for i, (*_, mo) in enumerate(track) if mo is Motion.TURN_UNDER)
+        reached[even] = max(y for _, y, _ in track[: first_turn + 1])
+    assert reached[False] < 0.45
+    assert reached[True] > 1.2
+
+
+def test_an_arc_ends_on_its_legs_heading_even_on_a_tight_segment():
+    """A 0.3 m segment's passes are 2 cm apart: each arc turns about a point near the
+    inner wheel, a third of a radian a tick at full speed. Its last tick goes no
+    further than onto the leg's heading, so every leg begins square to the edge (a
+    centimetre off its line is a tenth of a radian of eq. 3.1's phase there)."""
+    gmap = load_map("no-algae")
+    world = World(gmap, 1, "in-phase", seed=1, odom_noise=0.0)
+    world.move(0, 2.05 - world.truth(0)[0], 0.0)
+    gains = Gains(k_s=1e-9)
+    ctrl = Controller(1, 2.0, 2.3, 0.0, 6.0, world.truth(0)[0], gains)
+    lower = Neighbour(0, 0.0, 2.0, 0.0, 0.6)
+    upper = Neighbour(2, 2.3, 6.0, 0.0, 0.6)
+    starts, prev = [], None
+    for _ in range(2000):
+        x, y, th = world.truth(0)
+        r = world.sense(0)
+        lower = dataclasses.replace(lower, phase_des=ctrl.phase_des or 0.0)
+        upper = dataclasses.replace(upper, phase_des=ctrl.phase_des or 0.0)
+        out = ctrl.step(0.1, x, y, th, r.ice, r.algae, lower, upper, True, True)
+        if prev in (Motion.TURN_UNDER, Motion.TURN_OUT) and out.motion in (
+                Motion.ENTER, Motion.EXIT):
+            heading = math.pi / 2 if out.motion is Motion.ENTER else -math.pi / 2
+            starts.append(abs(wrap_pi(th - heading)))
+        prev = out.motion
+        world.step({0: (out.v, out.omega)}, 0.1)
+    assert len(starts) >= 10
+    assert max(starts) < 0.05, starts
