@@ -78,15 +78,18 @@ def make_cases(count: int, seed: int, sizes: tuple[int, ...] = TEAM_SIZES,
     cases = []
     for j in range(count):
         robots = int(sizes[j % len(sizes)])
+        # profiles dealt so that every team size meets every profile (with five of
+        # each, within 25 cases), and shapes in turn besides
+        algae = ALGAE[(j + j // len(sizes)) % len(ALGAE)]
+        shape = EDGES[j % len(EDGES)]
         shortest = max(LENGTH_RANGE_M[0], MIN_EDGE_PER_ROBOT_M * robots)
         if shortest > LENGTH_RANGE_M[1]:
             raise ValueError(f"{robots} robots need {shortest:.1f} m of edge: longer than "
                              f"the longest map ({LENGTH_RANGE_M[1]:g} m)")
         length = round(float(rng.uniform(shortest, LENGTH_RANGE_M[1])), 2)
-        spec = MapSpec.from_seed(int(rng.integers(1 << 30)), length_m=length,
-                                 edge=EDGES[j % len(EDGES)], algae=ALGAE[j % len(ALGAE)],
-                                 **({"amplitude_m": 0.0} if EDGES[j % len(EDGES)] == "straight"
-                                    else {}))
+        spec = MapSpec.from_seed(int(rng.integers(1 << 30)), length_m=length, edge=shape,
+                                 algae=algae,
+                                 **({"amplitude_m": 0.0} if shape == "straight" else {}))
         start = "in-phase" if rng.random() < 0.4 else f"ahead:{int(rng.integers(robots))}"
         cases.append(GeneralCase(j, spec.name, robots, start,
                                  duration_s or case_duration(length, robots),

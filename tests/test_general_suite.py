@@ -28,6 +28,9 @@ def test_cases_come_from_the_seed_and_hold_every_kind():
     assert cases != make_cases(40, 8)
     assert {c.robots for c in cases} == set(TEAM_SIZES)
     assert {c.edge for c in cases} == set(EDGES) and {c.algae for c in cases} == set(ALGAE)
+    # every team size meets every algae profile within 25 cases
+    assert {(c.robots, c.algae) for c in cases[:25]} == {(n, a) for n in TEAM_SIZES
+                                                         for a in ALGAE}
     for c in cases:
         assert c.length_m / c.robots >= 0.6 and 3.0 <= c.length_m <= 30.0
         assert c.duration_s >= MIN_DURATION_S
