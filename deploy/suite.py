@@ -71,6 +71,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="wheel odometry noise for every case, as for btrack sim")
     p.add_argument("--odom-turn-noise", type=non_negative, metavar="F",
                    help="odometry turn noise for every case, as for btrack sim")
+    p.add_argument("--engine", choices=("bus", "inprocess"), default="bus",
+                   help="bus: each case a full btrack sim team of processes; inprocess: each "
+                   "in one process, the same cores bit for bit, in seconds (truth or "
+                   "odometry poses) [bus]")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     return p
 
@@ -166,12 +170,55 @@ def run_cases(args: argparse.Namespace, cases: list[Case]) -> list[dict[str, Any
     return [results[c.name] for c in cases]
 
 
+def run_inprocess(args: argparse.Namespace, case: Case) -> dict[str, Any]:
+    """One thesis case in this process (``deploy.engine``); its summary as the bus
+    run's report would give it."""
+    from deploy.engine import BIN_M, EngineCase, run
+    from report.measures import EdgeModel, team_measures
+    from report.thesis import PHASE_SSE_RAD, WORKLOAD_SSE_M2, thesis_cell
+
+    began = time.monotonic()
+    gmap, tr = run(EngineCase(
+        map=case.map, robots=3, start=case.start, duration_s=args.duration, seed=args.seed,
+        localization=args.localization or "truth", config=args.config,
+        **{f: getattr(args, f) for f in ODOM_FLAGS if getattr(args, f) is not None}))
+    edge = EdgeModel(gmap.edge_lo, gmap.edge_hi, BIN_M, gmap.patrol_depth_bins(BIN_M),
+                     gmap.edge_y_bins(BIN_M))
+    summary: dict[str, Any] = {"map": case.map, "start": case.start}
+    summary.update(team_measures(tr.t, tr.x, tr.y, tr.lo, tr.hi, tr.direction, tr.phase,
+                                 tr.workload, edge))
+    summary["thesis_phase_sse_rad"] = thesis_cell(PHASE_SSE_RAD, case.map, case.start)
+    summary["thesis_workload_sse_m2"] = thesis_cell(WORKLOAD_SSE_M2, case.map, case.start)
+    summary["wall_s"] = round(time.monotonic() - began, 1)
+    summary["dir"] = case.out.name
+    return summary
+
+
+def _run_inprocess_all(args: argparse.Namespace, cases: list[Case]) -> list[dict[str, Any]]:
+    import multiprocessing
+
+    with multiprocessing.get_context("spawn").Pool(max(1, min(args.jobs, len(cases)))) as pool:
+        pending = [pool.apply_async(run_inprocess, (args, c)) for c in cases]
+        out = []
+        for done, (case, job) in enumerate(zip(cases, pending, strict=True), start=1):
+            summary = job.get()
+            case.wall_s = summary["wall_s"]
+            if not args.quiet:
+                print(_progress(case, done, len(cases), summary), flush=True)
+            out.append(summary)
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     if argv and argv[0] == "general":
         from deploy.general import main as general
 
         return general(argv[1:])
     args = build_parser().parse_args(argv)
+    if args.engine == "inprocess" and args.localization not in (None, "truth", "odometry"):
+        print("btrack suite: --engine inprocess takes truth or odometry poses (pf runs the "
+              "localizer process: use --engine bus)", file=sys.stderr)
+        return 2
     if args.jobs < 1 or not args.duration > 0:
         print("btrack suite: --jobs must be at least 1 and --duration positive",
               file=sys.stderr)
@@ -186,7 +233,10 @@ def main(argv: list[str] | None = None) -> int:
     began = time.monotonic()
     stop_on_sigterm()
     try:
-        summaries = run_cases(args, cases)
+        if args.engine == "inprocess":
+            summaries = _run_inprocess_all(args, cases)
+        else:
+            summaries = run_cases(args, cases)
     except KeyboardInterrupt as exc:
         code, word = interrupted_code(exc)
         print(f"\nbtrack suite: {word}; every case stopped", file=sys.stderr)
@@ -196,7 +246,8 @@ def main(argv: list[str] | None = None) -> int:
     from report.suite import write_suite_report
 
     settings: dict[str, Any] = {
-        "suite": "thesis", "localization": args.localization or "default",
+        "suite": "thesis", "engine": args.engine,
+        "localization": args.localization or ("truth" if args.engine == "inprocess" else "default"),
         "duration_s": args.duration, "seed": args.seed, "jobs": args.jobs,
         "wall_s": round(wall, 1),
     }

@@ -93,3 +93,28 @@ def test_sigterm_stops_the_suite_and_every_process_of_its_cases(tmp_path: Path) 
     finally:
         end(proc)
         end_children_of_run(case)
+
+
+def test_in_process_thesis_suite_gives_the_tables_in_seconds(tmp_path: Path) -> None:
+    """``--engine inprocess``: the same cases with the same cores, no processes; the
+    table quotes both phases and the relative workload. pf needs the localizer
+    process, so it is refused by name."""
+    out = tmp_path / "suite"
+    res = subprocess.run(
+        [sys.executable, "-m", "btrack", "suite", "thesis", "--engine", "inprocess",
+         "--maps", "half-algae", "no-algae", "--starts", "ahead:1", "--duration", "700",
+         "--jobs", "2", "--out", str(out)],
+        capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr[-2000:]
+    doc = json.loads((out / "summary.json").read_text())
+    assert doc["engine"] == "inprocess" and len(doc["cases"]) == 2
+    half = next(c for c in doc["cases"] if c["map"] == "half-algae")
+    for key in ("phase_sse_rad", "phase_path_sse_rad", "workload_sse_m2", "workload_rel_sse"):
+        assert isinstance(half[key], float), key
+    assert half["thesis_phase_sse_rad"] == 0.206
+    report = (out / "report.md").read_text()
+    assert "half-algae" in report and "0.206" in report
+    bad = subprocess.run([sys.executable, "-m", "btrack", "suite", "thesis", "--engine",
+                          "inprocess", "--localization", "pf", "--out", str(tmp_path / "x")],
+                         capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and "use --engine bus" in bad.stderr
