@@ -39,7 +39,12 @@ from deploy.procs import (
 )
 from wire import DecodeError, Keys, Progress, Tick, decode, encode
 from wire import Fault as WireFault
-from wire.session import SessionOptions, declare_publisher, loopback_options, open_session
+from wire.session import (
+    SessionOptions,
+    closed_within,
+    declare_publisher,
+    loopback_options,
+)
 
 PROGRESS_QUERY_S = 0.5  # longest wait for the recorder's answer to a progress query
 BACKGROUND_NICE = 10  # the recorder (the team's router) is off the lockstep's path
@@ -275,7 +280,7 @@ def run(args: argparse.Namespace) -> int:
             "--no-multicast"], nice=BACKGROUND_NICE)
         if not wait_listening(port, recorder, STARTUP_S):
             return _fail(group, recorder, f"did not listen on {hub} within {STARTUP_S:g} s")
-        with open_session(client) as session:
+        with closed_within(client) as session, group.stopped_on_interrupt():
             monitor = Monitor(session, keys)
             while not monitor.recorder_alive.wait(0.2):
                 if not recorder.alive():

@@ -5,6 +5,7 @@ ended by their own process id."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import signal
@@ -12,6 +13,7 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -158,6 +160,17 @@ class ProcessGroup:
                 os.kill(child.pid, signal.SIGKILL)
                 child.proc.wait()
         return child.proc.returncode
+
+    @contextlib.contextmanager
+    def stopped_on_interrupt(self) -> Iterator[None]:
+        """On Ctrl-C or SIGTERM inside the block, end every child before anything else
+        unwinds (a session's close, which can wait on a loaded router), then go on
+        with the interrupt."""
+        try:
+            yield
+        except KeyboardInterrupt:
+            self.stop_all()
+            raise
 
     def stop_all(self, grace_s: float = 5.0) -> None:
         for child in self.children:

@@ -119,6 +119,27 @@ def open_session(opts: SessionOptions) -> zenoh.Session:
 CLOSE_TIMEOUT_S = 3.0
 
 
+def close_within(session: zenoh.Session, timeout_s: float = CLOSE_TIMEOUT_S) -> bool:
+    """Close ``session``, waiting at most ``timeout_s`` (a close can block for seconds
+    under packet loss or while its router is too loaded to answer); False if it had not
+    closed by then, the process going on regardless."""
+    closer = threading.Thread(target=session.close, daemon=True)
+    closer.start()
+    closer.join(timeout_s)
+    return not closer.is_alive()
+
+
+@contextlib.contextmanager
+def closed_within(opts: SessionOptions, timeout_s: float = CLOSE_TIMEOUT_S
+                  ) -> Iterator[zenoh.Session]:
+    """A session, closed on exit with ``close_within``."""
+    session = open_session(opts)
+    try:
+        yield session
+    finally:
+        close_within(session, timeout_s)
+
+
 @contextlib.contextmanager
 def bounded_session(opts: SessionOptions, who: str = "btrack") -> Iterator[zenoh.Session]:
     """A session closed on exit, without letting a slow close hang the process (it can
