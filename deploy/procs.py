@@ -30,8 +30,11 @@ def stop_on_sigterm() -> None:
     """Make SIGTERM (``kill PID``, ``timeout``, a service manager) end a launcher the way
     Ctrl-C does: through its ``except KeyboardInterrupt``, which stops every child.
     Without it the launcher dies at once and its children, in their own sessions,
-    run on."""
+    run on. SIGINT is taken back too: a launcher started in the background (``&``,
+    ``nohup``, a suite that was) inherits SIGINT ignored, and then the suite's Ctrl-C to
+    its launchers, or a test's, was lost, and they ran on with every child."""
     signal.signal(signal.SIGTERM, _raise_terminated)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def interrupted_code(exc: KeyboardInterrupt) -> tuple[int, str]:
