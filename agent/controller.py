@@ -137,7 +137,6 @@ class Controller:
         self.turns = 0.0  # phi_des unwrapped: the count of sweeps the pass grid walks by
         self.published: Neighbour | None = None  # what we told the neighbours last tick
         self.rate = TeamRate()  # the cycle, when this robot is the chain's root
-        self._dt = 0.1
         self.passes: int | None = None  # the team's passes per sweep, when known
         self.cycle_s = self.gains.cycle_s
 
@@ -152,21 +151,22 @@ class Controller:
         lo_nb = lower if has_lower else None
         up_nb = upper if has_upper else None
 
-        def heard(nb: Neighbour | None, value: float) -> float | None:
-            return value if nb is not None and value > 0 else None
+        def known(value: float) -> float | None:  # 0 on the wire: not known yet
+            return value if value > 0 else None
 
-        needs = chain_max(need, heard(lo_nb, lo_nb.need_below if lo_nb else 0.0),
-                          heard(up_nb, up_nb.need_above if up_nb else 0.0))
-        spans = chain_max(span, heard(lo_nb, lo_nb.span_below if lo_nb else 0.0),
-                          heard(up_nb, up_nb.span_above if up_nb else 0.0))
+        lower_need = known(lo_nb.need_below) if lo_nb else None
+        upper_need = known(up_nb.need_above) if up_nb else None
+        lower_span = known(lo_nb.span_below) if lo_nb else None
+        upper_span = known(up_nb.span_above) if up_nb else None
+        needs = chain_max(need, lower_need, upper_need)
+        spans = chain_max(span, lower_span, upper_span)
         if lo_nb is not None and lo_nb.passes > 0 and lo_nb.cycle_s > 0:
             passes, cycle = lo_nb.passes, lo_nb.cycle_s
             self.rate.cycle_s = cycle  # were it to become the root, it goes on from here
         else:
-            team_need = team_max(need, None, needs.above)
-            passes = passes_for(team_max(span, None, spans.above), cfg.max_spacing_m,
+            passes = passes_for(team_max(span, lower_span, upper_span), cfg.max_spacing_m,
                                 cfg.passes_per_sweep, self.passes)
-            target = cycle_for(team_need, passes, g.cycle_margin)
+            target = cycle_for(team_max(need, lower_need, upper_need), passes, g.cycle_margin)
             cycle = g.cycle_s if g.cycle_s > 0 else self.rate.update(target, dt)
         return cycle, passes, (needs.below, needs.above, spans.below, spans.above)
 
@@ -220,7 +220,6 @@ class Controller:
         if before is not None and self.published is not None:
             lag = wrap_pi(before - position_to_phase(x, self.lo, self.hi, self.patrol.direction))
             self.patrol.hurry = lag > HURRY_RAD
-        self._dt = dt
         self.cycle_s, self.passes, chain = self._agree(dt, lower, upper, has_lower, has_upper)
         self.patrol.team_passes = self.passes
         rate = TWO_PI / self.cycle_s
@@ -241,7 +240,7 @@ class Controller:
             self.phase_des = desired_phase_step(mine, rate, dt, shift, consensus)
         self.phase_des = limit_lead(self.phase_des, phase, g.max_lead_rad)
         self._count_turns(before, lower if has_lower else None)
-        v = self._speed(steer, phase, rate, y)
+        v = self._speed(steer, phase, rate, y, dt)
         v, omega = wheel_limited(v, v * steer.curvature, self.limits)
         depth_avg = self.depth_map.average(self.lo, self.hi)
         workload = depth_avg * (self.hi - self.lo)
@@ -254,7 +253,7 @@ class Controller:
             direction, steer.motion, self.turns, ends, self.cycle_s, self.passes,
         )
 
-    def _arc_speed(self, steer: Steer) -> float:
+    def _arc_speed(self, steer: Steer, dt: float) -> float:
         """Full speed round an arc, but no further on its last tick than onto the leg's
         heading: at 10 Hz a tight arc turns a third of a radian a tick, and the leg
         would begin that far off its heading, its line a centimetre or two away, which
@@ -263,9 +262,9 @@ class Controller:
         left = p.rotation_left()
         if left is None or steer.curvature == 0.0:
             return lim.v_max
-        return min(lim.v_max, max(left, 0.0) / (abs(steer.curvature) * self._dt))
+        return min(lim.v_max, max(left, 0.0) / (abs(steer.curvature) * dt))
 
-    def _speed(self, steer: Steer, phase: float, rate: float, y: float) -> float:
+    def _speed(self, steer: Steer, phase: float, rate: float, y: float, dt: float) -> float:
         """Forward speed along the patrol (agent.phase.leg_speed, arc_may_begin): legs
         paced to end when the next arc is due, each arc begun so that its middle falls
         on the middle of its step of the team's phase."""
@@ -282,8 +281,8 @@ class Controller:
             return leg_speed(time_left, fast, slow, steer.measuring, lim.v_max,
                              p.config.measure_speed, p.config.min_leg_speed)
         if p.turned > 0.05:
-            return self._arc_speed(steer)
-        if self.patrol.hurry or arc_may_begin(
+            return self._arc_speed(steer, dt)
+        if p.hurry or arc_may_begin(
                 self.phase_des, position_to_phase(p.arc_from_x, self.lo, self.hi, p.direction),
                 position_to_phase(p.line_x, self.lo, self.hi, p.direction), lead):
             return lim.v_max
