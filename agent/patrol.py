@@ -340,7 +340,6 @@ class Patrol:
 
     def _start_turn(self, lo: float, hi: float, heading_in: bool) -> None:
         """Choose the next pass line, then the arc from where the robot is onto it."""
-        c = self.config
         line, direction, new_sweep = self._plan(lo, hi, heading_in)
         self.arc_from_x = self.line_x
         self.sweeps += new_sweep
@@ -348,8 +347,7 @@ class Patrol:
             self.passes = self.team_passes
         self.direction = direction
         self.line_x = line
-        self.turn_radius = min(c.max_turn_radius_m,
-                               max(0.5 * c.min_turn_radius_m, 0.5 * abs(line - self.x)))
+        self.turn_radius = self._arc_radius(abs(line - self.x))
         # Heading +y, going +x is a right (clockwise) turn; heading -y it is a left one.
         self.turn_sign = -direction if heading_in else direction
         self.turned = 0.0
@@ -458,8 +456,8 @@ class Patrol:
 
     def to_go(self, y: float, lo: float, hi: float) -> tuple[float, float]:
         """What is left of this straight leg as the map expects it: (metres at full
-        speed, metres at the measuring speed, the zones of ``_measuring`` still ahead).
-        (0, 0) in an arc."""
+        speed, metres at the measuring speed), the latter the parts of the zones of
+        ``_measuring`` still ahead. (0, 0) in an arc."""
         c = self.config
         dm = self.depth_map
         edge = dm.edge_y(self.x)
@@ -503,10 +501,14 @@ class Patrol:
     def arc_time_s(self, lo: float, hi: float, v_max: float, wheel_base_m: float) -> float:
         """How long an arc between two passes takes at full speed, its outer wheel at
         ``v_max`` (a tight arc is slow: the robot turns about a point near its wheel)."""
-        c = self.config
-        radius = min(c.max_turn_radius_m,
-                     max(0.5 * c.min_turn_radius_m, 0.5 * self.spacing(lo, hi)))
+        radius = self._arc_radius(self.spacing(lo, hi))
         return math.pi * (radius + 0.5 * wheel_base_m) / v_max
+
+    def _arc_radius(self, across_m: float) -> float:
+        """The radius of a 180 degree arc that moves the robot ``across_m`` along the
+        edge, within the configured bounds."""
+        c = self.config
+        return min(c.max_turn_radius_m, max(0.5 * c.min_turn_radius_m, 0.5 * across_m))
 
     def pass_need_s(self, lo: float, hi: float, v_max: float, wheel_base_m: float) -> float:
         """The time this robot's hardest pass (a leg at the deepest depth it knows on its
