@@ -38,12 +38,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from agent import config as agent_config  # noqa: E402
 from deploy import engine  # noqa: E402
 from deploy.procs import non_negative  # noqa: E402
-from report import measures as m  # noqa: E402
 from report.thesis import MAPS, PHASE_SSE_RAD, STARTS, WORKLOAD_SSE_M2, thesis_cell  # noqa: E402
 from simworld.world import ODOM_NOISE  # noqa: E402
 
 ROBOTS = 3
-BIN_M = engine.BIN_M
 
 
 @dataclass
@@ -65,30 +63,14 @@ def run_case(case: Case) -> dict[str, Any]:
         map=case.map, robots=ROBOTS, start=case.start, duration_s=case.duration_s,
         seed=case.seed, overrides=case.overrides, localization=case.localization,
         odom_noise=case.odom_noise, odom_turn_noise=case.odom_turn_noise))
-    t, ids = tr.t, range(ROBOTS)
-    depth = gmap.patrol_depth_bins(BIN_M)  # what the world tells the recorder
-    phase = {i: m.position_phase(tr.x[i], tr.lo[i], tr.hi[i], tr.direction[i]) for i in ids}
-    work = {i: m.true_workload(tr.lo[i], tr.hi[i], gmap.edge_lo, BIN_M, depth) for i in ids}
-    pairs = m.neighbour_pairs(list(ids))
-    phase_sse, _ = m.steady_state(t, m.pair_errors(phase, pairs, wrap=True))
-    work_sse, _ = m.steady_state(t, m.pair_errors(work, pairs, wrap=False))
-    seen_phase_sse, _ = m.steady_state(
-        t, m.pair_errors({i: tr.phase[i] for i in ids}, pairs, wrap=True))
-    seen_work_sse, _ = m.steady_state(
-        t, m.pair_errors({i: tr.workload[i] for i in ids}, pairs, wrap=False))
-    edge = m.EdgeModel(gmap.edge_lo, gmap.edge_hi, BIN_M, depth, gmap.edge_y_bins(BIN_M))
-    every = m.team_measures(t, tr.x, tr.y, tr.lo, tr.hi, tr.direction, tr.phase, tr.workload,
-                            edge)
+    every = engine.measures(gmap, tr)
+    kept = ("phase_sse_rad", "workload_sse_m2", "phase_sse_agents_rad", "workload_sse_agents_m2",
+            "phase_path_sse_rad", "workload_rel_sse", "revisit_worst_ratio", "still_frac_max")
     return {
         "map": case.map, "start": case.start, "seed": case.seed,
-        "phase_path_sse_rad": every["phase_path_sse_rad"],
-        "workload_rel_sse": every["workload_rel_sse"],
-        "revisit_worst_ratio": every["revisit_worst_ratio"],
-        "still_frac_max": every["still_frac_max"],
         "duration_s": case.duration_s,
         "localization": case.localization,
-        "phase_sse_rad": phase_sse, "workload_sse_m2": work_sse,
-        "phase_sse_agents_rad": seen_phase_sse, "workload_sse_agents_m2": seen_work_sse,
+        **{key: every[key] for key in kept},
         "thesis_phase_sse_rad": thesis_cell(PHASE_SSE_RAD, case.map, case.start),
         "thesis_workload_sse_m2": thesis_cell(WORKLOAD_SSE_M2, case.map, case.start),
         "x": tr.x, "y": tr.y,

@@ -19,8 +19,9 @@ import numpy as np
 
 from agent import config as agent_config
 from agent.controller import Controller, Neighbour, initial_segment
+from report.measures import EdgeModel, team_measures
 from simworld.maps import GridMap, load_map
-from simworld.world import ODOM_NOISE, World
+from simworld.world import ODOM_NOISE, ROBOT_RADIUS_M, World
 
 DT_S = 0.1  # the world's tick at 10 Hz control
 BIN_M = 0.1  # the report's depth bins (the world's WorldInfo default)
@@ -100,3 +101,14 @@ def run(case: EngineCase, gmap: GridMap | None = None) -> tuple[GridMap, Tracks]
         world.step(cmds, DT_S)
     t = np.arange(ticks) * DT_S
     return gmap, Tracks(t, x, y, lo, hi, direction, seen_phase, seen_work, cycle)
+
+
+def measures(gmap: GridMap, tracks: Tracks) -> dict[str, float]:
+    """Every measure of the report (``report.measures.team_measures``) of a run: the
+    map's edge and true patrol depth as the world tells the recorder, the robots' true
+    tracks, and what their agents published."""
+    edge = EdgeModel(gmap.edge_lo, gmap.edge_hi, BIN_M, gmap.patrol_depth_bins(BIN_M),
+                     gmap.edge_y_bins(BIN_M), ROBOT_RADIUS_M)
+    tr = tracks
+    return team_measures(tr.t, tr.x, tr.y, tr.lo, tr.hi, tr.direction, tr.phase,
+                         tr.workload, edge)

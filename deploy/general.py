@@ -125,18 +125,13 @@ def goals_met(row: dict[str, Any]) -> dict[str, bool]:
 def run_inprocess(case: GeneralCase, localization: str = "truth",
                   tracks_dir: str | None = None, config: str | None = None) -> dict[str, Any]:
     """One case in this process: the row of the table."""
-    from deploy.engine import BIN_M, EngineCase, run
-    from report.measures import EdgeModel, team_measures
-    from simworld.world import ROBOT_RADIUS_M
+    from deploy.engine import EngineCase, measures, run
 
     began = time.monotonic()
     gmap, tr = run(EngineCase(map=case.map, robots=case.robots, start=case.start,
                               duration_s=case.duration_s, seed=case.seed,
                               localization=localization, config=config))
-    edge = EdgeModel(gmap.edge_lo, gmap.edge_hi, BIN_M, gmap.patrol_depth_bins(BIN_M),
-                     gmap.edge_y_bins(BIN_M), ROBOT_RADIUS_M)
-    row = _row(case, team_measures(tr.t, tr.x, tr.y, tr.lo, tr.hi, tr.direction, tr.phase,
-                                   tr.workload, edge))
+    row = _row(case, measures(gmap, tr))
     row["cycle_s"] = float(tr.cycle_s[0, -1])
     row["wall_s"] = round(time.monotonic() - began, 1)
     if tracks_dir:

@@ -173,8 +173,7 @@ def run_cases(args: argparse.Namespace, cases: list[Case]) -> list[dict[str, Any
 def run_inprocess(args: argparse.Namespace, case: Case) -> dict[str, Any]:
     """One thesis case in this process (``deploy.engine``); its summary as the bus
     run's report would give it."""
-    from deploy.engine import BIN_M, EngineCase, run
-    from report.measures import EdgeModel, team_measures
+    from deploy.engine import EngineCase, measures, run
     from report.thesis import PHASE_SSE_RAD, WORKLOAD_SSE_M2, thesis_cell
 
     began = time.monotonic()
@@ -182,11 +181,8 @@ def run_inprocess(args: argparse.Namespace, case: Case) -> dict[str, Any]:
         map=case.map, robots=3, start=case.start, duration_s=args.duration, seed=args.seed,
         localization=args.localization or "truth", config=args.config,
         **{f: getattr(args, f) for f in ODOM_FLAGS if getattr(args, f) is not None}))
-    edge = EdgeModel(gmap.edge_lo, gmap.edge_hi, BIN_M, gmap.patrol_depth_bins(BIN_M),
-                     gmap.edge_y_bins(BIN_M))
     summary: dict[str, Any] = {"map": case.map, "start": case.start}
-    summary.update(team_measures(tr.t, tr.x, tr.y, tr.lo, tr.hi, tr.direction, tr.phase,
-                                 tr.workload, edge))
+    summary.update(measures(gmap, tr))
     summary["thesis_phase_sse_rad"] = thesis_cell(PHASE_SSE_RAD, case.map, case.start)
     summary["thesis_workload_sse_m2"] = thesis_cell(WORKLOAD_SSE_M2, case.map, case.start)
     summary["wall_s"] = round(time.monotonic() - began, 1)
