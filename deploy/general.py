@@ -21,7 +21,6 @@ import json
 import math
 import multiprocessing
 import os
-import subprocess
 import sys
 import time
 from dataclasses import asdict, dataclass
@@ -159,41 +158,25 @@ def _bus_args(case: GeneralCase, out: Path, localization: str,
 def run_bus(cases: list[GeneralCase], out: Path, localization: str, jobs: int,
             progress: Any, config: str | None = None) -> list[dict[str, Any]]:
     """Each case a full ``btrack sim`` team, ``jobs`` at once; rows in case order."""
-    from deploy.suite import Case, _stop
+    from deploy.suite import Case, run_launchers
 
-    waiting = list(cases)
-    running: list[tuple[GeneralCase, Case]] = []
+    general = {out / case.name: case for case in cases}
     rows: dict[int, dict[str, Any]] = {}
-    try:
-        while waiting or running:
-            while waiting and len(running) < jobs:
-                case = waiting.pop(0)
-                sim = Case(case.map, case.start, out / case.name)
-                sim.out.mkdir(parents=True, exist_ok=True)
-                with open(sim.out / "sim.log", "wb") as log:
-                    sim.proc = subprocess.Popen(
-                        _bus_args(case, sim.out, localization, config),
-                        stdin=subprocess.DEVNULL,
-                        stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
-                sim.began = time.monotonic()
-                running.append((case, sim))
-            time.sleep(0.2)
-            for case, sim in [r for r in running if r[1].proc and r[1].proc.poll() is not None]:
-                running.remove((case, sim))
-                assert sim.proc is not None
-                summary = sim.out / "summary.json"
-                if sim.proc.returncode == 0 and summary.exists():
-                    row = _row(case, json.loads(summary.read_text()))
-                else:
-                    row = _row(case, {})
-                    row["error"] = (f"btrack sim exited with {sim.proc.returncode}; see "
-                                    f"{sim.out / 'sim.log'}")
-                row["wall_s"] = round(time.monotonic() - sim.began, 1)
-                rows[case.index] = row
-                progress(row, len(rows))
-    finally:
-        for _, sim in running:
-            _stop(sim)
+
+    def finished(sim: Case) -> None:
+        case, summary = general[sim.out], sim.out / "summary.json"
+        if sim.code == 0 and summary.exists():
+            row = _row(case, json.loads(summary.read_text()))
+        else:
+            row = _row(case, {})
+            row["error"] = f"btrack sim exited with {sim.code}; see {sim.out / 'sim.log'}"
+        row["wall_s"] = round(sim.wall_s, 1)
+        rows[case.index] = row
+        progress(row, len(rows))
+
+    run_launchers([Case(c.map, c.start, path) for path, c in general.items()],
+                  lambda sim: _bus_args(general[sim.out], sim.out, localization, config),
+                  jobs, finished)
     return [rows[c.index] for c in cases]
 
 

@@ -16,6 +16,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -94,11 +95,11 @@ def _sim_args(args: argparse.Namespace, case: Case) -> list[str]:
     return out + forward_flags(args, ODOM_FLAGS)
 
 
-def _start(args: argparse.Namespace, case: Case) -> None:
+def _start(case: Case, argv: list[str]) -> None:
     case.out.mkdir(parents=True, exist_ok=True)
     with open(case.out / "sim.log", "wb") as log:
         case.proc = subprocess.Popen(
-            _sim_args(args, case), stdin=subprocess.DEVNULL, stdout=log,
+            argv, stdin=subprocess.DEVNULL, stdout=log,
             stderr=subprocess.STDOUT, start_new_session=True,
         )
     case.began = time.monotonic()
@@ -144,15 +145,17 @@ def _progress(case: Case, done: int, total: int, summary: dict[str, Any]) -> str
             f" m^2 (thesis {summary['thesis_workload_sse_m2']:.3f})")
 
 
-def run_cases(args: argparse.Namespace, cases: list[Case]) -> list[dict[str, Any]]:
-    """Run the cases, ``args.jobs`` at once; return their summaries in case order."""
+def run_launchers(cases: list[Case], argv: Callable[[Case], list[str]], jobs: int,
+                  finished: Callable[[Case], None]) -> None:
+    """Start each case's launcher (``argv(case)``, its output in OUT/sim.log), ``jobs`` at
+    once, and hand each to ``finished`` as it ends, its exit code and wall time set; on
+    the way out, however it comes, interrupt those still running."""
     waiting, running = list(cases), list[Case]()
-    results: dict[str, dict[str, Any]] = {}
     try:
         while waiting or running:
-            while waiting and len(running) < max(1, args.jobs):
+            while waiting and len(running) < max(1, jobs):
                 case = waiting.pop(0)
-                _start(args, case)
+                _start(case, argv(case))
                 running.append(case)
             time.sleep(0.2)
             for case in [c for c in running if c.proc is not None and c.proc.poll() is not None]:
@@ -160,13 +163,22 @@ def run_cases(args: argparse.Namespace, cases: list[Case]) -> list[dict[str, Any
                 assert case.proc is not None
                 case.code = case.proc.returncode
                 case.wall_s = time.monotonic() - case.began
-                results[case.name] = _case_summary(case)
-                if not args.quiet:
-                    print(_progress(case, len(results), len(cases), results[case.name]),
-                          flush=True)
+                finished(case)
     finally:
         for case in running:
             _stop(case)
+
+
+def run_cases(args: argparse.Namespace, cases: list[Case]) -> list[dict[str, Any]]:
+    """Run the cases, ``args.jobs`` at once; return their summaries in case order."""
+    results: dict[str, dict[str, Any]] = {}
+
+    def finished(case: Case) -> None:
+        results[case.name] = _case_summary(case)
+        if not args.quiet:
+            print(_progress(case, len(results), len(cases), results[case.name]), flush=True)
+
+    run_launchers(cases, lambda case: _sim_args(args, case), args.jobs, finished)
     return [results[c.name] for c in cases]
 
 
