@@ -148,10 +148,7 @@ def bounded_session(opts: SessionOptions, who: str = "btrack") -> Iterator[zenoh
     try:
         yield session
     finally:
-        closer = threading.Thread(target=session.close, daemon=True)
-        closer.start()
-        closer.join(CLOSE_TIMEOUT_S)
-        if closer.is_alive():
+        if not close_within(session, CLOSE_TIMEOUT_S):
             print(f"{who}: session close took over {CLOSE_TIMEOUT_S:g} s; exiting anyway",
                   file=sys.stderr)
             sys.stdout.flush()
