@@ -18,7 +18,7 @@ from report.summary import json_safe  # noqa: E402
 
 Goal = tuple[str, str, float, str]
 
-# The columns of the table: key, heading, format (a callable on the value)
+# The columns of the table: key, heading, format spec ("%" for a fraction shown as %)
 COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("phase_sse_rad", "position phase rad", ".4f"),
     ("phase_path_sse_rad", "path phase rad", ".3f"),
