@@ -24,7 +24,6 @@ from simworld.maps import GridMap, load_map
 from simworld.world import ODOM_NOISE, ROBOT_RADIUS_M, World
 
 DT_S = 0.1  # the world's tick at 10 Hz control
-BIN_M = 0.1  # the report's depth bins (the world's WorldInfo default)
 
 
 @dataclass(frozen=True)
@@ -107,8 +106,9 @@ def measures(gmap: GridMap, tracks: Tracks) -> dict[str, float]:
     """Every measure of the report (``report.measures.team_measures``) of a run: the
     map's edge and true patrol depth as the world tells the recorder, the robots' true
     tracks, and what their agents published."""
-    edge = EdgeModel(gmap.edge_lo, gmap.edge_hi, BIN_M, gmap.patrol_depth_bins(BIN_M),
-                     gmap.edge_y_bins(BIN_M), ROBOT_RADIUS_M)
+    cell = gmap.cell_m  # the report's bins: the map's cells, as WorldInfo's
+    edge = EdgeModel(gmap.edge_lo, gmap.edge_hi, cell, gmap.patrol_depth_bins(cell),
+                     gmap.edge_y_bins(cell), ROBOT_RADIUS_M)
     tr = tracks
     return team_measures(tr.t, tr.x, tr.y, tr.lo, tr.hi, tr.direction, tr.phase,
                          tr.workload, edge)

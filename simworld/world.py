@@ -151,8 +151,12 @@ class World:
         self.k += 1
         self.t = self.k * dt
 
-    def info(self, bin_m: float = 0.1) -> dict[str, object]:
-        """The world's part of wire.WorldInfo (edge, depths, geometry)."""
+    def info(self, bin_m: float | None = None) -> dict[str, object]:
+        """The world's part of wire.WorldInfo (edge, depths, geometry). The true depths
+        and edge come per bin of ``bin_m``, by default the map's own cell, so the
+        report's true workload is the map's, not a binned copy of it (a step of the
+        algae inside a 0.1 m bin would otherwise move with the bin's side)."""
+        bin_m = self.map.cell_m if bin_m is None else bin_m
         return {
             "edge_lo": self.map.edge_lo,
             "edge_hi": self.map.edge_hi,

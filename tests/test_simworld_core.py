@@ -279,5 +279,6 @@ def test_world_info_fields() -> None:
     run = dict(map="half-algae", start="in-phase", robots=3, localization="truth", seed=1)
     info = WorldInfo(**run, duration_s=10.0, dt=0.1, **w.info())  # type: ignore[arg-type]
     assert decode(WorldInfo, encode(info)) == info
-    assert info.robot_radius == 0.17 and info.min_depth == 0.3 and len(info.patrol_depth) == 60
-    assert info.edge_y == [0.0] * 60  # the built-in maps' edge is straight at y = 0
+    assert info.robot_radius == 0.17 and info.min_depth == 0.3 and info.bin_m == 0.01
+    assert len(info.patrol_depth) == 600  # the map's own 1 cm cells
+    assert info.edge_y == [0.0] * 600  # the built-in maps' edge is straight at y = 0
