@@ -34,14 +34,19 @@ AHEAD_WAIT_RAD = 0.5  # a robot this far ahead of its desired phase waits on its
 
 @dataclass(frozen=True)
 class Gains:
-    k_s: float = 0.01  # boundary step per m^2 of workload error per tick (eq. 4.3)
+    # Boundary step per m^2 of workload error per tick (eq. 4.3). The thesis's 0.01 took
+    # a chain of 20 robots past twenty minutes to balance (the slowest mode of a chain
+    # falls as 1/n^2); 0.1 is still under 2 / (4 d_max) = 0.25 for depths to 2 m.
+    k_s: float = 0.1
     k_phi: float = 0.3  # phase consensus gain per tick (eq. 4.7); < 1/2 is stable for any n
     # The common cycle, phi_dot_des = 2 pi / cycle: 0 derives it from the team's need
     # (agent.team); a positive value fixes it, in seconds.
     cycle_s: float = 0.0
     cycle_margin: float = 1.15  # the cycle gives the slowest robot this much slack
     max_lead_rad: float = 1.0  # the desired phase stays this close to the actual one
-    min_segment_m: float = 0.3
+    # No segment shorter: a deep bloom shared by many robots needs segments of 0.2 m
+    # and less for equal work (16 passes 1 cm apart are still a patrol).
+    min_segment_m: float = 0.15
 
     def __post_init__(self) -> None:
         if self.k_s <= 0 or self.k_phi <= 0:
