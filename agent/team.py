@@ -54,8 +54,8 @@ def passes_for(longest_m: float, max_spacing_m: float, min_passes: int,
     every sweep). A change is made only when the present number no longer fits, or
     fits with more than ``hysteresis`` to spare, so a boundary hovering near a
     threshold does not flip the team's grid from sweep to sweep."""
-    if longest_m <= 0 or max_spacing_m <= 0 or min_passes < 1:
-        raise ValueError("need a positive segment, spacing and passes")
+    if not (0 < longest_m < math.inf and 0 < max_spacing_m < math.inf) or min_passes < 1:
+        raise ValueError("need a positive finite segment and spacing, and passes")
     need = max(min_passes, math.ceil(longest_m / max_spacing_m - 1e-9))
     if current is None or current < need:
         return need

@@ -531,3 +531,10 @@ def test_leg_speed_is_paced_floored_capped_and_full_once_late(time_left, fast, s
         assert v == cap
     elif not measuring and floor < v < v_max:  # paced
         assert fast / v + slow / min(v_max, v_measure) == pytest.approx(time_left, abs=1e-9)
+
+
+@pytest.mark.parametrize("longest, spacing", [(math.inf, 0.3), (math.nan, 0.3), (0.0, 0.3),
+                                              (5.0, 0.0), (5.0, math.inf)])
+def test_passes_for_refuses_what_no_segment_or_spacing_can_be(longest, spacing):
+    with pytest.raises(ValueError, match="positive finite"):
+        passes_for(longest, spacing, 16)
