@@ -197,9 +197,10 @@ def run_inprocess(args: argparse.Namespace, case: Case) -> dict[str, Any]:
     summary.update(measures(gmap, tr))
     summary["thesis_phase_sse_rad"] = thesis_cell(PHASE_SSE_RAD, case.map, case.start)
     summary["thesis_workload_sse_m2"] = thesis_cell(WORKLOAD_SSE_M2, case.map, case.start)
-    summary["wall_s"] = round(time.monotonic() - began, 1)
-    summary["dir"] = case.out.name
-    return summary
+    wall = time.monotonic() - began
+    summary["wall_s"] = round(wall, 1)
+    summary["speedup"] = round(args.duration / wall, 1) if wall > 0 else None
+    return summary  # no "dir": an in-process case writes no run directory
 
 
 def _run_inprocess_all(args: argparse.Namespace, cases: list[Case]) -> list[dict[str, Any]]:

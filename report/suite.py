@@ -106,11 +106,16 @@ def suite_markdown(cases: list[dict[str, Any]], settings: dict[str, Any], below:
     def f(value: Any, digits: int = 3) -> str:
         return f"{value:.{digits}f}" if isinstance(value, (int, float)) else "n/a"
 
+    def times(value: Any) -> str:
+        return f"{value:.0f}x" if isinstance(value, (int, float)) else "n/a"
+
     def percent(value: Any) -> str:
         return f"{100 * value:.2f}" if isinstance(value, (int, float)) else "n/a"
 
     for c in cases:
-        name = f"[{c.get('map')} {c.get('start')}]({c.get('dir')}/report.md)"
+        name = f"{c.get('map')} {c.get('start')}"
+        if c.get("dir"):  # a bus run's own directory, with its report
+            name = f"[{name}]({c['dir']}/report.md)"
         if "error" in c:
             lines.append(f"| {name} | {c['error']} | | | | | | | | |")
             continue
@@ -122,7 +127,7 @@ def suite_markdown(cases: list[dict[str, Any]], settings: dict[str, Any], below:
             f"{percent(c.get('workload_rel_sse'))} / {percent(c.get('workload_rel_max'))} | "
             f"{f(c.get('converge_s'), 0)} | "
             f"{f(c.get('revisit_mean_s'), 0)} / {f(c.get('revisit_worst_s'), 0)} / "
-            f"{f(c.get('revisit_ideal_s'), 0)} | {f(c.get('speedup'), 0)}x | "
+            f"{f(c.get('revisit_ideal_s'), 0)} | {times(c.get('speedup'))} | "
             f"{f(c.get('wall_s'), 0)} |"
         )
     lines.append("")

@@ -114,6 +114,9 @@ def test_in_process_thesis_suite_gives_the_tables_in_seconds(tmp_path: Path) -> 
     assert half["thesis_phase_sse_rad"] == 0.206
     report = (out / "report.md").read_text()
     assert "half-algae" in report and "0.206" in report
+    # no case directory is written, so none is linked; the speed-up is measured
+    assert "/report.md)" not in report and "n/ax" not in report
+    assert half["speedup"] > 1 and "dir" not in half
     bad = subprocess.run([sys.executable, "-m", "btrack", "suite", "thesis", "--engine",
                           "inprocess", "--localization", "pf", "--out", str(tmp_path / "x")],
                          capture_output=True, text=True, timeout=60)
