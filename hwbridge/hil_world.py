@@ -192,7 +192,9 @@ class HilWorld:
     def publish_info(self) -> None:
         a = self.args
         self.pub_info.put(encode(WorldInfo(
-            map=a.map, start=a.start, robots=self.n, localization="truth", seed=a.seed,
+            # the map's own name: a procedural map's full spec, which rebuilds it
+            map=self.world.map.name, start=a.start, robots=self.n, localization="truth",
+            seed=a.seed,
             duration_s=a.duration, dt=a.dt, realtime=True,
             **self.world.info())))  # type: ignore[arg-type]
 

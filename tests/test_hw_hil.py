@@ -18,7 +18,8 @@ def test_sim_hil_short_run(tmp_path: Path) -> None:
     try:
         res = subprocess.run(
             [sys.executable, "-m", "btrack", "sim", "--hil", "--duration", "6", "--out",
-             str(out), "--quiet", "--no-report", "--hil-faults", "0.02"],
+             str(out), "--quiet", "--no-report", "--hil-faults", "0.02",
+             "--map", "procedural:7,length=5,algae=steps"],
             capture_output=True, timeout=180)
     finally:
         end_children_of_run(out)
@@ -30,6 +31,11 @@ def test_sim_hil_short_run(tmp_path: Path) -> None:
     assert summary["port_losses"] == 0  # the devices outlive the bridges at the end
     assert summary["scan_rate_hz"] > 0 and summary["world"]["ticks"] > 30
     assert (out / "run.mcap").stat().st_size > 0
+    # the recording names the map in full, so the report (or a rerun) rebuilds it
+    from report.load import load_run
+
+    info = load_run(out).info
+    assert info["map"].startswith("procedural:7,length=5") and "edge=" in info["map"]
     for i in range(3):
         agent = json.loads((out / "logs" / f"agent{i}.out").read_text().splitlines()[-1])
         assert agent["ticks"] > 10  # the agents ran on the bridges' sensing
