@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 TWO_PI = 2.0 * math.pi
 
 
@@ -38,6 +40,34 @@ def position_to_phase(s_rob: float, lo: float, hi: float, direction: int) -> flo
     if direction > 0:
         return wrap_2pi(math.pi * (s - lo) / length)
     return wrap_2pi(math.pi * (hi - s) / length + math.pi)
+
+
+def wrap_pi_array(angle: np.ndarray | float) -> np.ndarray:
+    """``wrap_pi`` over an array (the report's and the localizer's): (-pi, pi]."""
+    a = np.asarray(angle, dtype=float)
+    return a - TWO_PI * np.ceil((a - math.pi) / TWO_PI)
+
+
+def wrap_2pi_array(angle: np.ndarray | float) -> np.ndarray:
+    """``wrap_2pi`` over an array: [0, 2 pi)."""
+    a = np.mod(np.asarray(angle, dtype=float), TWO_PI)
+    return np.where(a >= TWO_PI, 0.0, a)
+
+
+def position_to_phase_array(
+    x: np.ndarray | float,
+    lo: np.ndarray | float,
+    hi: np.ndarray | float,
+    direction: np.ndarray | float,
+) -> np.ndarray:
+    """``position_to_phase`` (eq. 3.1) over arrays, for the report: x clipped into
+    [lo, hi], towards hi while direction >= 0, result in [0, 2 pi)."""
+    x, lo, hi, direction = (np.asarray(v, dtype=float) for v in (x, lo, hi, direction))
+    width = hi - lo
+    xc = np.clip(x, lo, hi)
+    towards_hi = math.pi * (xc - lo) / width
+    towards_lo = math.pi * (hi - xc) / width + math.pi
+    return wrap_2pi_array(np.where(direction >= 0, towards_hi, towards_lo))
 
 
 def phase_to_position(phase: float, lo: float, hi: float) -> tuple[float, int]:

@@ -45,6 +45,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from agent.phase import wrap_pi_array
+
 TWO_PI = 2.0 * math.pi
 
 
@@ -291,10 +293,6 @@ def systematic_resample(weights: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     return (flat.reshape(rows, n) - (np.arange(rows) * n)[:, None]).astype(np.intp)
 
 
-def wrap(a: np.ndarray) -> np.ndarray:
-    return (a + math.pi) % TWO_PI - math.pi
-
-
 class Localizer:
     """One particle filter per robot, all in arrays of shape (robots, particles)."""
 
@@ -428,7 +426,7 @@ class Localizer:
         mth = math.atan2(s, co)
         vx = float(w @ (self.x[robot] - mx) ** 2)
         vy = float(w @ (self.y[robot] - my) ** 2)
-        vth = float(w @ wrap(self.theta[robot] - mth) ** 2)
+        vth = float(w @ wrap_pi_array(self.theta[robot] - mth) ** 2)
         return mx, my, mth, vx, vy, vth
 
     def step(self, ranges: np.ndarray, geometry: ScanGeometry, dist: np.ndarray,

@@ -15,6 +15,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+# the report's angles are arrays: the agents' own functions, over arrays
+from agent.phase import position_to_phase_array as position_phase
+from agent.phase import wrap_pi_array as wrap_pi
+
 TWO_PI = 2.0 * math.pi
 
 # The report's bands and grids (``btrack report`` can override the two bands).
@@ -76,35 +80,6 @@ class EdgeModel:
     def total_workload(self) -> float:
         """True workload of the whole edge, m^2; NaN without a depth profile."""
         return float(self.workload(self.edge_lo, self.edge_hi))
-
-
-def wrap_pi(angle: np.ndarray | float) -> np.ndarray:
-    """Angles wrapped to (-pi, pi]."""
-    a = np.asarray(angle, dtype=float)
-    return a - TWO_PI * np.ceil((a - math.pi) / TWO_PI)
-
-
-def wrap_2pi(angle: np.ndarray | float) -> np.ndarray:
-    """Angles wrapped to [0, 2 pi)."""
-    a = np.mod(np.asarray(angle, dtype=float), TWO_PI)
-    return np.where(a >= TWO_PI, 0.0, a)
-
-
-def position_phase(
-    x: np.ndarray | float,
-    lo: np.ndarray | float,
-    hi: np.ndarray | float,
-    direction: np.ndarray | float,
-) -> np.ndarray:
-    """Position-based phase, thesis eq. 3.1 with the case on the direction of travel:
-    pi (x - lo) / (hi - lo) towards hi (+1), pi (hi - x) / (hi - lo) + pi towards lo;
-    x clipped into [lo, hi], result in [0, 2 pi)."""
-    x, lo, hi, direction = (np.asarray(v, dtype=float) for v in (x, lo, hi, direction))
-    width = hi - lo
-    xc = np.clip(x, lo, hi)
-    towards_hi = math.pi * (xc - lo) / width
-    towards_lo = math.pi * (hi - xc) / width + math.pi
-    return wrap_2pi(np.where(direction >= 0, towards_hi, towards_lo))
 
 
 def hold(

@@ -4,18 +4,11 @@ from __future__ import annotations
 
 import math
 
+from agent.phase import wrap_pi
+
 WHEEL_BASE_M = 0.26
 MAX_WHEEL_SPEED = 0.5  # m/s, each wheel
-TWO_PI = 2.0 * math.pi
 _STRAIGHT = 1e-9  # |turn| below which an arc is integrated as a straight line
-
-
-def wrap_angle(a: float) -> float:
-    """a wrapped to (-pi, pi]."""
-    a = math.fmod(a + math.pi, TWO_PI)
-    if a <= 0.0:
-        a += TWO_PI
-    return a - math.pi
 
 
 def limit_wheels(
@@ -36,13 +29,13 @@ def integrate_arc(
 ) -> tuple[float, float, float]:
     """Pose after driving ``dist`` along an arc that turns by ``dtheta`` (exact)."""
     if abs(dtheta) < _STRAIGHT:
-        return x + dist * math.cos(theta), y + dist * math.sin(theta), wrap_angle(theta + dtheta)
+        return x + dist * math.cos(theta), y + dist * math.sin(theta), wrap_pi(theta + dtheta)
     radius = dist / dtheta
     end = theta + dtheta
     return (
         x + radius * (math.sin(end) - math.sin(theta)),
         y - radius * (math.cos(end) - math.cos(theta)),
-        wrap_angle(end),
+        wrap_pi(end),
     )
 
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from simworld.kinematics import integrate_arc, limit_wheels, wrap_angle
+from simworld.kinematics import integrate_arc, limit_wheels
 from simworld.maps import MIN_DEPTH_M, ROBOT_ROOM_M, GridMap
 
 ROBOT_RADIUS_M = 0.17
@@ -171,4 +171,4 @@ class World:
         }
 
 
-__all__ = ["ROBOT_RADIUS_M", "Reading", "World", "parse_start", "start_poses", "wrap_angle"]
+__all__ = ["ROBOT_RADIUS_M", "Reading", "World", "parse_start", "start_poses"]

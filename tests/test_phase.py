@@ -137,3 +137,25 @@ def test_limit_lead():
     assert limit_lead(2.5, 1.0, 1.0) == pytest.approx(2.0)
     assert limit_lead(0.2, 1.0, 1.0) == pytest.approx(0.2)
     assert limit_lead(1.5, 1.0, 1.0) == pytest.approx(1.5)
+
+
+@given(st.lists(st.floats(-50.0, 50.0), min_size=1, max_size=20))
+def test_the_array_wrappers_are_the_scalar_ones_element_by_element(angles):
+    """One convention everywhere: the report's and the localizer's wrapping over arrays
+    gives what the agents' gives one angle at a time, (-pi, pi] and [0, 2 pi)."""
+    from agent.phase import wrap_2pi, wrap_2pi_array, wrap_pi_array
+
+    assert wrap_pi_array(angles) == pytest.approx([wrap_pi(a) for a in angles], abs=1e-12)
+    assert wrap_2pi_array(angles) == pytest.approx([wrap_2pi(a) for a in angles], abs=1e-12)
+    assert float(wrap_pi_array(-math.pi)) == wrap_pi(-math.pi) == pytest.approx(math.pi)
+
+
+@given(st.floats(0.0, 1.0), st.floats(0.1, 10.0), st.sampled_from([1, -1]))
+def test_eq_3_1_over_arrays_is_the_agents_eq_3_1(frac, length, direction):
+    from agent.phase import position_to_phase_array
+
+    lo = 2.0
+    x = lo + frac * length
+    want = position_to_phase(x, lo, lo + length, direction)
+    assert float(position_to_phase_array(x, lo, lo + length, direction)) == pytest.approx(
+        want, abs=1e-12)

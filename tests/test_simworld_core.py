@@ -10,12 +10,12 @@ from hypothesis import given
 from hypothesis import strategies as st
 from PIL import Image
 
+from agent.phase import wrap_pi
 from simworld.kinematics import (
     MAX_WHEEL_SPEED,
     WHEEL_BASE_M,
     limit_wheels,
     step_pose,
-    wrap_angle,
 )
 from simworld.maps import MapError, builtin_map, load_map, load_png
 from simworld.world import World, start_poses
@@ -187,7 +187,7 @@ def test_straight_and_arc_integration() -> None:
     # half circle, turning right, radius 0.5
     x, y, th = step_pose(0.0, 0.0, 0.0, 0.5 * math.pi, -math.pi, 1.0)
     assert (x, y) == pytest.approx((0.0, -1.0), abs=1e-12)
-    assert abs(wrap_angle(th - math.pi)) < 1e-12
+    assert abs(wrap_pi(th - math.pi)) < 1e-12
     # many small steps equal one big step (exact arcs compose)
     pose = (0.3, -0.2, 0.4)
     for _ in range(100):
@@ -196,8 +196,8 @@ def test_straight_and_arc_integration() -> None:
 
 
 @given(st.floats(-50, 50))
-def test_wrap_angle_range(a: float) -> None:
-    w = wrap_angle(a)
+def test_wrap_pi_range(a: float) -> None:
+    w = wrap_pi(a)
     assert -math.pi < w <= math.pi
     assert math.isclose(math.cos(w), math.cos(a), abs_tol=1e-9)
 
