@@ -8,8 +8,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from agent.depthmap import DepthMap
 from agent.partition import SegmentView, shared_boundary
-from agent.patrol import DepthMap, Motion, Patrol, PatrolConfig, Steer
+from agent.patrol import Motion, Patrol, PatrolConfig, Steer
 from agent.phase import (
     TWO_PI,
     arc_may_begin,

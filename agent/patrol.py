@@ -1,5 +1,5 @@
-"""The lawnmower patrol of thesis chapter 6 as a state machine, and the robot's
-depth map from which its workload is measured.
+"""The lawnmower patrol of thesis chapter 6 as a state machine; it measures into the
+robot's depth map (``agent.depthmap``).
 
 Five motions: (1) ENTER: forward until the upward sensor sees the ice edge (at most
 ``max_search_m``: a robot whose pose has drifted off the ice's end or side would
@@ -18,34 +18,18 @@ their phases together, level with each other.
 
 from __future__ import annotations
 
-import bisect
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from enum import Enum
 
+from agent.depthmap import PRECISE, ROUGH, DepthMap
 from agent.phase import wrap_pi
 
 HALF_PI = 0.5 * math.pi
 FIRST_PASS_CANDIDATES = 24  # offsets tried for the first pass of a sweep
 FIRST_PASS_MIN, FIRST_PASS_SPAN = 0.3, 1.7  # its length, in passes: 0.3 to 2
-INTERIOR = 0.3  # a pass line within this fraction of a bin from its centre samples it
-SIDE_M = 0.015  # a sample this close to a bin's side may be of the next column
 ON_LINE_M = 1e-6  # a pass line this close to a segment's end is on it
 GOLDEN = 0.6180339887
-EDGE_POOL_BINS = 2  # the ice edge at a bin: the crossings of this many bins either side
-KEEP_CROSSINGS = 16  # per bin
-EDGE_FIT_SPREAD_M = 0.02  # crossings spread less than this along the edge: no slope
-KEEP_POINTS = 16  # depth samples per bin that the workload's profile keeps, with where
-# How much a depth sample is worth: a leg that crossed the algae's end slowly, measured
-# from a well-known ice edge; one that crossed it at full speed (a tick is 5 cm: an
-# out-leg in a column its map has no depth for); one taken on a bin's side, which
-# may be the next column's. A bin keeps samples of its best kind.
-SUSPECT, ROUGH, PRECISE = 0, 1, 2
-# What a sample or crossing of each kind weighs: inverse variances, a tick of 1 cm at the
-# measuring speed against one of 5 cm at full speed.
-WEIGHT = {PRECISE: 25.0, ROUGH: 1.0, SUSPECT: 1.0}
-SMOOTH_M = 0.05  # a depth sample is averaged with the samples this close to it
-AGREE_M = 0.05  # that measured within this of it (across a step they differ more)
 
 
 class Motion(Enum):
@@ -97,274 +81,6 @@ class PatrolConfig:
             raise ValueError("measure_zone_m must be >= 0 and measure_speed positive")
         if self.edge_zone_m < 0 or self.turn_margin_m < 0:
             raise ValueError("edge_zone_m and turn_margin_m must be >= 0")
-
-
-@dataclass
-class DepthMap:
-    """Patrol depth the robot measured along the edge, in two forms.
-
-    Per bin (what the patrol plans with: where to slow down, how deep to turn): the
-    mean of the last ``keep`` samples of the bin's best kind (PRECISE, ROUGH,
-    SUSPECT) but the highest and lowest, so one leg that strayed across a column
-    boundary does not move it, and a changed profile is followed within a few passes.
-
-    As a profile (what the workload integrates, ``average``): the last KEEP_POINTS
-    samples of each bin, each where it was taken. Passes land at new offsets sweep
-    after sweep, so a step of the algae inside a bin is placed to within the
-    samples' spacing, where the bin's one value would put it at the bin's side (on
-    a 1 m step, 5 cm out is 0.05 m^2 of workload). Depths are measured from the ice
-    edge that the in-legs' crossings near the sample give (a line through them)."""
-
-    edge_lo: float
-    bin_m: float
-    default_m: float
-    keep: int = 3
-    depths: dict[int, float] = field(default_factory=dict)
-    samples: dict[int, list[float]] = field(default_factory=dict)
-    recorded: int = 0  # samples recorded so far, over all bins
-    last_seen: dict[int, int] = field(default_factory=dict)  # bin -> ``recorded`` then
-    kind: dict[int, int] = field(default_factory=dict)  # bin -> the kind of its samples
-    # Depths the neighbours measured near the ends they share with this robot: a bin
-    # this robot has not measured itself (a sliver at its segment's end, or one the
-    # boundary just handed over) takes the neighbour's value, not its nearest own bin's.
-    shared: dict[int, float] = field(default_factory=dict)
-    # per bin, the in-legs' crossings of the ice edge: (x, y, weight), WEIGHT's
-    crossings: dict[int, list[tuple[float, float, float]]] = field(default_factory=dict)
-    _edges: dict[int, tuple[float, float] | None] = field(default_factory=dict)  # fits
-    # bin -> its last KEEP_POINTS samples as (s, depth, kind), the kind before a
-    # sample near the bin's side is marked SUSPECT (its place is known here)
-    points: dict[int, list[tuple[float, float, int]]] = field(default_factory=dict)
-    version: int = 0  # counts the changes of depths and shared, for what caches them
-    # the profile ``average`` integrates, built for one version: (version, where each
-    # piece starts, the integral up to there, each piece's depth)
-    _integral: tuple[int, list[float], list[float], list[float]] = (-1, [], [], [])
-    _learned: tuple[object, object] = (None, None)  # the last two tuples learned
-    _ends: tuple[object, tuple[tuple[int, float], ...]] = (None, ())  # near_ends's, by key
-
-    def bin_of(self, s: float) -> int:
-        return int(math.floor((s - self.edge_lo) / self.bin_m))
-
-    def record(self, s: float, depth: float, kind: int = PRECISE) -> None:
-        """A depth sample at ``s``; ROUGH for one taken at full speed. It counts for
-        less (SUSPECT) within SIDE_M of a bin's side."""
-        b = self.bin_of(s)
-        placed = self.points.setdefault(b, [])
-        placed.append((s, depth, kind))
-        del placed[:-KEEP_POINTS]
-        self.version += 1
-        offset = s - self.edge_lo - b * self.bin_m
-        if min(offset, self.bin_m - offset) < SIDE_M:
-            kind = SUSPECT
-        best = self.kind.get(b, -1)
-        if kind < best:
-            return
-        if kind > best:
-            self.samples[b] = []
-            self.kind[b] = kind
-        recent = self.samples[b]
-        recent.append(depth)
-        del recent[: -self.keep]
-        ordered = sorted(recent)
-        if len(ordered) >= 3:
-            ordered = ordered[1:-1]
-        self.depths[b] = sum(ordered) / len(ordered)
-        self.recorded += 1
-        if kind > SUSPECT:
-            self.last_seen[b] = self.recorded
-
-    def known(self, b: int) -> bool:
-        """Whether bin ``b``'s depth is measured (not only on its side) or shared."""
-        return self.kind.get(b, SUSPECT) > SUSPECT or b in self.shared
-
-    def cross(self, s: float, y: float, kind: int = PRECISE) -> None:
-        """An in-leg crossed the ice edge at ``y`` (the middle of the ticks around it),
-        slowly (PRECISE: to half a centimetre) or at full speed (ROUGH)."""
-        b = self.bin_of(s)
-        seen = self.crossings.setdefault(b, [])
-        seen.append((s, y, WEIGHT[kind]))
-        del seen[:-KEEP_CROSSINGS]
-        for k in range(b - EDGE_POOL_BINS, b + EDGE_POOL_BINS + 1):
-            self._edges.pop(k, None)
-
-    def edge_y(self, s: float) -> float | None:
-        """The ice edge at ``s``, None if no in-leg has crossed it near ``s`` yet: the
-        line fitted (weighted by kind) through the crossings within EDGE_POOL_BINS
-        bins, so a sloped or curved edge is not pulled towards its mean, and noise
-        averages out over many crossings made at every offset from the ticks."""
-        b = self.bin_of(s)
-        if b not in self._edges:
-            self._edges[b] = self._fit_edge(b)
-        fit = self._edges[b]
-        if fit is None:
-            return None
-        at, slope = fit
-        return at + slope * (s - self.edge_lo - (b + 0.5) * self.bin_m)
-
-    def _fit_edge(self, b: int) -> tuple[float, float] | None:
-        """(the edge at bin ``b``'s centre, its slope) from the crossings near it."""
-        seen = [c for k in range(b - EDGE_POOL_BINS, b + EDGE_POOL_BINS + 1)
-                for c in self.crossings.get(k, ())]
-        if not seen:
-            return None
-        centre = self.edge_lo + (b + 0.5) * self.bin_m
-        w = sum(c[2] for c in seen)
-        mx = sum(c[2] * (c[0] - centre) for c in seen) / w
-        my = sum(c[2] * c[1] for c in seen) / w
-        sxx = sum(c[2] * (c[0] - centre - mx) ** 2 for c in seen) / w
-        if sxx < EDGE_FIT_SPREAD_M ** 2:  # all at one place: their mean
-            return my, 0.0
-        slope = sum(c[2] * (c[0] - centre - mx) * (c[1] - my) for c in seen) / (w * sxx)
-        return my - slope * mx, slope
-
-    def learn(self, depths: tuple[tuple[int, float], ...]) -> None:
-        """A neighbour's published depths of the bins near its ends."""
-        if depths in self._learned:  # as last tick's: most ticks, from both sides
-            return
-        self._learned = (self._learned[-1], depths)
-        for b, depth in depths:
-            if self.shared.get(b) != depth:
-                self.shared[b] = depth
-                self.version += 1
-
-    def near_ends(self, lo: float, hi: float, reach_m: float) -> tuple[tuple[int, float], ...]:
-        """This robot's own measured depths of the bins within ``reach_m`` of either end
-        of [lo, hi], for its neighbours."""
-        key = (self.version, self.bin_of(lo - reach_m), self.bin_of(lo + reach_m),
-               self.bin_of(hi - reach_m), self.bin_of(hi + reach_m))
-        if self._ends[0] != key:
-            bins = set(range(key[1], key[2] + 1)) | set(range(key[3], key[4] + 1))
-            self._ends = (key, tuple((b, self.depths[b]) for b in sorted(bins)
-                                     if self.kind.get(b, SUSPECT) > SUSPECT))
-        return self._ends[1]
-
-    def gap(self, lo: float, hi: float, tolerance_m: float = 0.02) -> bool:
-        """Whether a bin inside [lo, hi] is not known and that matters: the nearest
-        known bins either side of it differ by more than ``tolerance_m``."""
-        first = self.bin_of(lo + 0.5 * self.bin_m)
-        last = self.bin_of(hi - 0.5 * self.bin_m)
-
-        def value(k: int) -> float | None:
-            return self.depths.get(k, self.shared.get(k)) if self.known(k) else None
-
-        for b in range(first, last + 1):
-            if self.known(b):
-                continue
-            below = next((v for k in range(b - 1, first - 2, -1)
-                          if (v := value(k)) is not None), None)
-            above = next((v for k in range(b + 1, last + 2)
-                          if (v := value(k)) is not None), None)
-            if below is not None and above is not None and abs(below - above) > tolerance_m:
-                return True
-        return False
-
-    def staleness(self, s: float) -> int:
-        """Samples recorded elsewhere since the bin at ``s`` was last sampled; a bin
-        never sampled (but on its side) counts as staler than any sampled one. A line
-        near a bin's side counts for nothing: a leg there wobbles across two columns and
-        measures neither."""
-        b = self.bin_of(s)
-        if abs(s - self.edge_lo - (b + 0.5) * self.bin_m) > INTERIOR * self.bin_m:
-            return 0
-        seen = self.last_seen.get(b)
-        return 10 * (self.recorded + 1) if seen is None else self.recorded - seen
-
-    def average(self, lo: float, hi: float) -> float:
-        """d_a over [lo, hi]: the length-weighted mean of the measured profile
-        (``_profile``); ``default_m`` if nothing is measured."""
-        if not self.depths or hi <= lo:
-            return self.default_m
-        starts, integral, values = self._profile()
-        return (self._integrate(hi, starts, integral, values)
-                - self._integrate(lo, starts, integral, values)) / (hi - lo)
-
-    @staticmethod
-    def _integrate(x: float, starts: list[float], integral: list[float],
-                   values: list[float]) -> float:
-        """The profile's integral from its first piece's start to ``x`` (the first and
-        last pieces reach on beyond it)."""
-        j = max(0, bisect.bisect_right(starts, x) - 1)
-        return integral[j] + values[j] * (x - starts[j])
-
-    def _profile(self) -> tuple[list[float], list[float], list[float]]:
-        """The profile of this version as pieces: where each starts (each ends where
-        the next starts), the integral up to its start, its depth.
-
-        Each sample's depth is first smoothed with the samples near it that agree
-        with it (``_smoothed``). A bin with samples is split between them, each
-        stretch the nearest sample's depth, the first and last reaching to the bin's
-        sides: columns on the bin grid come out whole, a step or a slope inside a bin
-        where its samples put it. A bin with no sample of its own (or only on its
-        sides) takes a neighbour's value for it, else the line between the nearest
-        sampled bins either side (the nearest one's beyond the last)."""
-        if self._integral[0] == self.version:
-            return self._integral[1:]
-        own = sorted(p for placed in self.points.values() for p in placed)
-        by_bin: dict[int, list[tuple[float, float]]] = {}  # bin -> (place, smoothed depth)
-        for (p, _, _), v in zip(own, _smoothed(own), strict=True):
-            by_bin.setdefault(self.bin_of(p), []).append((p, v))
-        column = {b: sum(v for _, v in rows) / len(rows) for b, rows in by_bin.items()}
-        known = sorted(column)
-        first = min(known[0], min(self.shared, default=known[0]))
-        last = max(known[-1], max(self.shared, default=known[-1]))
-        starts: list[float] = []
-        values: list[float] = []
-        j = 0  # known[j] is the last sampled bin at or below b
-        for b in range(first, last + 1):
-            b_lo = self.edge_lo + b * self.bin_m
-            while j + 1 < len(known) and known[j + 1] <= b:
-                j += 1
-            rows = by_bin.get(b)
-            if rows and self.kind.get(b) == SUSPECT and b in self.shared:
-                rows = None  # only samples on its sides, which may be the next column's
-            if rows and len(rows) > 1:
-                starts.append(b_lo)
-                values.append(rows[0][1])
-                for a, z in zip(rows, rows[1:], strict=False):
-                    starts.append(0.5 * (a[0] + z[0]))
-                    values.append(z[1])
-                continue
-            if rows:
-                depth = column[b]
-            elif b in self.shared:
-                depth = self.shared[b]
-            elif b < known[0]:
-                depth = column[known[0]]
-            elif j + 1 >= len(known):
-                depth = column[known[-1]]
-            else:
-                below, above = known[j], known[j + 1]
-                frac = (b - below) / (above - below)
-                depth = (1 - frac) * column[below] + frac * column[above]
-            starts.append(b_lo)
-            values.append(depth)
-        integral = [0.0]
-        for k in range(1, len(starts)):
-            integral.append(integral[-1] + values[k - 1] * (starts[k] - starts[k - 1]))
-        self._integral = (self.version, starts, integral, values)
-        return starts, integral, values
-
-
-def _smoothed(samples: list[tuple[float, float, int]]) -> list[float]:
-    """Each sample's depth (samples sorted by place) as the weighted mean of the
-    samples within SMOOTH_M of it that agree with it to AGREE_M: noise averages out
-    along a column, a step between columns stays where the samples put it."""
-    out = []
-    lo = 0
-    n = len(samples)
-    for p, d, _ in samples:
-        while samples[lo][0] < p - SMOOTH_M:
-            lo += 1
-        total = weight = 0.0
-        k = lo
-        while k < n and samples[k][0] <= p + SMOOTH_M:
-            q = samples[k]
-            if abs(q[1] - d) <= AGREE_M:
-                w = WEIGHT[q[2]]
-                total += w * q[1]
-                weight += w
-            k += 1
-        out.append(total / weight)
-    return out
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,8 @@ import statistics
 import pytest
 
 from agent.controller import Controller, Gains, Neighbour, initial_segment
-from agent.patrol import PRECISE, ROUGH, DepthMap, Motion, Patrol, PatrolConfig
+from agent.depthmap import PRECISE, ROUGH, DepthMap
+from agent.patrol import Motion, Patrol, PatrolConfig
 from agent.phase import position_to_phase, wrap_pi
 from simworld.maps import load_map
 from simworld.world import World

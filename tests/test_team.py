@@ -12,7 +12,8 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from agent.controller import Controller, Gains, Neighbour, initial_segment
-from agent.patrol import DepthMap, Patrol, PatrolConfig
+from agent.depthmap import DepthMap
+from agent.patrol import Patrol, PatrolConfig
 from agent.phase import leg_speed, position_to_phase
 from agent.team import ChainMax, TeamRate, chain_max, cycle_for, passes_for, team_max
 
