@@ -62,7 +62,7 @@ class DepthMap:
     # bin -> its last KEEP_POINTS samples as (s, depth, kind), the kind before a
     # sample near the bin's side is marked SUSPECT (its place is known here)
     points: dict[int, list[tuple[float, float, int]]] = field(default_factory=dict)
-    version: int = 0  # counts the changes of depths and shared, for what caches them
+    version: int = 0  # counts every sample recorded and shared depth changed, for caches
     # the profile ``average`` integrates, built for one version: (version, where each
     # piece starts, the integral up to there, each piece's depth)
     _integral: tuple[int, list[float], list[float], list[float]] = (-1, [], [], [])
@@ -71,6 +71,10 @@ class DepthMap:
 
     def bin_of(self, s: float) -> int:
         return int(math.floor((s - self.edge_lo) / self.bin_m))
+
+    def centre(self, b: int) -> float:
+        """The middle of bin ``b`` along the edge."""
+        return self.edge_lo + (b + 0.5) * self.bin_m
 
     def record(self, s: float, depth: float, kind: int = PRECISE) -> None:
         """A depth sample at ``s``; ROUGH for one taken at full speed. It counts for
@@ -126,7 +130,7 @@ class DepthMap:
         if fit is None:
             return None
         at, slope = fit
-        return at + slope * (s - self.edge_lo - (b + 0.5) * self.bin_m)
+        return at + slope * (s - self.centre(b))
 
     def _fit_edge(self, b: int) -> tuple[float, float] | None:
         """(the edge at bin ``b``'s centre, its slope) from the crossings near it."""
@@ -134,7 +138,7 @@ class DepthMap:
                 for c in self.crossings.get(k, ())]
         if not seen:
             return None
-        centre = self.edge_lo + (b + 0.5) * self.bin_m
+        centre = self.centre(b)
         w = sum(c[2] for c in seen)
         mx = sum(c[2] * (c[0] - centre) for c in seen) / w
         my = sum(c[2] * c[1] for c in seen) / w
@@ -191,7 +195,7 @@ class DepthMap:
         near a bin's side counts for nothing: a leg there wobbles across two columns and
         measures neither."""
         b = self.bin_of(s)
-        if abs(s - self.edge_lo - (b + 0.5) * self.bin_m) > INTERIOR * self.bin_m:
+        if abs(s - self.centre(b)) > INTERIOR * self.bin_m:
             return 0
         seen = self.last_seen.get(b)
         return 10 * (self.recorded + 1) if seen is None else self.recorded - seen

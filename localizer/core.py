@@ -47,8 +47,6 @@ from scipy.optimize import linear_sum_assignment
 
 from agent.phase import wrap_pi_array
 
-TWO_PI = 2.0 * math.pi
-
 
 @dataclass(frozen=True)
 class FilterConfig:
