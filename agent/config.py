@@ -4,6 +4,7 @@ command-line flags on top of that. Unknown keys are refused by name."""
 from __future__ import annotations
 
 import dataclasses
+import math
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -31,6 +32,8 @@ def _build(cls: type, values: dict[str, Any], where: str) -> Any:
             value = float(value)
         if not isinstance(value, kind) or isinstance(value, bool) != (kind is bool):
             raise ConfigError(f"{where}.{key}: expected {kind.__name__}, got {value!r}")
+        if isinstance(value, float) and not math.isfinite(value):
+            raise ConfigError(f"{where}.{key}: expected a finite number, got {value!r}")
         typed[key] = value
     try:
         return cls(**typed)

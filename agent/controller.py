@@ -63,6 +63,12 @@ class RobotLimits:
     v_max: float = 0.5  # m/s, per wheel as well
     wheel_base_m: float = 0.26
 
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.v_max) and self.v_max > 0):
+            raise ValueError(f"v_max must be a positive speed, not {self.v_max:g} m/s")
+        if not (math.isfinite(self.wheel_base_m) and self.wheel_base_m > 0):
+            raise ValueError(f"wheel_base_m must be positive, not {self.wheel_base_m:g} m")
+
 
 @dataclass(frozen=True)
 class Neighbour:

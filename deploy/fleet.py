@@ -285,7 +285,13 @@ def load(path: str | Path) -> Fleet:
     """Read and check a fleet file."""
     p = Path(path)
     try:
-        text = p.read_text()
+        raw = p.read_bytes()
     except OSError as exc:
         raise FleetError(f"{p}: cannot read: {exc.strerror or exc}") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw[:exc.start].count(b"\n") + 1
+        raise FleetError(f"{p}:{line}: not UTF-8 text (byte {exc.start}: "
+                         f"{raw[exc.start:exc.start + 1]!r}); a fleet file is TOML") from None
     return parse(text, str(p))

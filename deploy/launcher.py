@@ -21,6 +21,7 @@ from pathlib import Path
 
 import zenoh
 
+from agent import config as agent_config
 from agent.controller import Gains
 from agent.phase import wrap_pi
 from agent.stability import check_gains
@@ -37,6 +38,7 @@ from deploy.procs import (
     stop_on_sigterm,
     wait_listening,
 )
+from simworld.maps import MapError, load_map
 from wire import DecodeError, Keys, Progress, Tick, decode, encode
 from wire import Fault as WireFault
 from wire.session import (
@@ -46,6 +48,7 @@ from wire.session import (
     loopback_options,
 )
 
+MAX_ROBOTS = 100  # one machine's processes: beyond this a run fails slowly, not at once
 PROGRESS_QUERY_S = 0.5  # longest wait for the recorder's answer to a progress query
 BACKGROUND_NICE = 10  # the recorder (the team's router) is off the lockstep's path
 STARTUP_S = 60.0
@@ -240,8 +243,72 @@ def _fail(group: ProcessGroup, child: Child, what: str) -> int:
     return 1
 
 
+def refusal(args: argparse.Namespace, bodies: int) -> str | None:
+    """Why the run cannot go as asked, before any process starts; None if it can.
+    ``bodies`` is the team plus every id that joins."""
+    if not 1 <= args.robots <= MAX_ROBOTS:
+        return f"--robots must be between 1 and {MAX_ROBOTS}, not {args.robots}"
+    if not (math.isfinite(args.duration) and args.duration > 0):
+        return f"--duration must be a positive number of seconds, not {args.duration:g}"
+    if args.ns is not None:
+        try:
+            Keys(args.ns)
+        except ValueError as exc:
+            return f"--ns: {exc}"
+    overrides = {"gains": {"k_s": args.k_s, "k_phi": args.k_phi, "cycle_s": args.cycle_s},
+                 "patrol": {"passes_per_sweep": args.passes}}
+    try:
+        gains, _, _ = agent_config.load(args.config, overrides)
+    except agent_config.ConfigError as exc:
+        return f"--config: {exc}"
+    try:
+        gmap = load_map(args.map, args.scale, args.seed)
+    except MapError as exc:
+        return f"--map: {exc}"
+    edge = gmap.edge_hi - gmap.edge_lo
+    if bodies * gains.min_segment_m > edge:
+        return (f"{bodies} robots need {bodies * gains.min_segment_m:.2f} m of edge at "
+                f"min_segment_m = {gains.min_segment_m:g} m each; the edge of {args.map} is "
+                f"{edge:.2f} m long (at most {int(edge / gains.min_segment_m)} robots)")
+    return None
+
+
+def _make_out(out: Path) -> str | None:
+    """Create the output directory; why not, if it cannot be."""
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / ".write-test"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        return f"--out {out}: cannot write there: {exc.strerror or exc}"
+    return None
+
+
 def run(args: argparse.Namespace) -> int:
     stop_on_sigterm()
+    if not 1 <= args.robots <= MAX_ROBOTS:
+        print(f"btrack sim: --robots must be between 1 and {MAX_ROBOTS}, not {args.robots}",
+              file=sys.stderr)
+        return 2
+    try:
+        schedule, bodies = _schedule(args)
+    except faults.FaultSpecError as exc:
+        print(f"btrack sim: {exc}", file=sys.stderr)
+        return 2
+    why = refusal(args, bodies)
+    if why is None and not args.hil:
+        late = [f for f in schedule if f.at_s >= args.duration]
+        if late:
+            why = (f"--fault {late[0].kind}:{late[0].agent}@{late[0].at_s:g} would come after "
+                   f"the run's end (--duration {args.duration:g} s)")
+    out: Path = args.out or Path("runs") / time.strftime(
+        "hil-%Y%m%d-%H%M%S" if args.hil else "%Y%m%d-%H%M%S")
+    why = why or _make_out(out)
+    if why is not None:
+        print(f"btrack sim: {why}", file=sys.stderr)
+        return 2
+    args.out = out
     if args.hil:  # the hardware stack with emulated devices: hwbridge/hil.py
         from hwbridge import hil
 
@@ -252,13 +319,6 @@ def run(args: argparse.Namespace) -> int:
     if problems:
         print("btrack sim: unstable gains: " + "; ".join(problems), file=sys.stderr)
         return 2
-    try:
-        schedule, bodies = _schedule(args)
-    except faults.FaultSpecError as exc:
-        print(f"btrack sim: {exc}", file=sys.stderr)
-        return 2
-    out: Path = args.out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
-    out.mkdir(parents=True, exist_ok=True)
     ns = args.ns or f"btrack/sim-{os.getpid()}-{int(time.time() * 1000) % 10**9}"
     keys = Keys(ns)
     port = free_port()

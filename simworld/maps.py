@@ -9,6 +9,7 @@ algae cells are under ice, so they are ice cells too.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -232,6 +233,22 @@ def builtin_map(name: str, seed: int = 1, cell_m: float = BUILTIN_CELL_M) -> Gri
 
 
 # PNG maps ----------------------------------------------------------------------
+MAX_MAP_PIXELS = 25_000_000  # 5000 x 5000 px: 250 m square at 5 cm a pixel
+_ROWS_AT_ONCE = 256  # image rows classified together: bounded memory for any width
+
+
+def _nearest_colour(rgb: np.ndarray) -> np.ndarray:
+    """Per pixel, 0 (water), 1 (ice) or 2 (algae): the palette colour nearest to it,
+    a band of rows at a time."""
+    palette = np.array([WATER_RGB, ICE_RGB, ALGAE_RGB], dtype=np.int32)
+    kind = np.empty(rgb.shape[:2], dtype=np.uint8)
+    for r in range(0, rgb.shape[0], _ROWS_AT_ONCE):
+        band = rgb[r:r + _ROWS_AT_ONCE].astype(np.int32)
+        dist = ((band[:, :, None, :] - palette[None, None, :, :]) ** 2).sum(axis=-1)
+        kind[r:r + _ROWS_AT_ONCE] = dist.argmin(axis=-1)
+    return kind
+
+
 def load_png(path: str | Path, scale_m_per_px: float = 0.05) -> GridMap:
     """A map drawn in the thesis's colours: each pixel is water (blue), ice (white) or
     algae under ice (green), whichever its colour is nearest. Image row 0 is the top."""
@@ -240,13 +257,22 @@ def load_png(path: str | Path, scale_m_per_px: float = 0.05) -> GridMap:
     try:
         from PIL import Image
 
-        with Image.open(path) as img:
-            rgb = np.asarray(img.convert("RGB"), dtype=np.int32)
+        with warnings.catch_warnings():  # we refuse too large an image ourselves, below
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            img = Image.open(path)
+        with img:
+            width, height = img.size  # from the header: nothing decoded yet
+            if width * height > MAX_MAP_PIXELS:
+                raise MapError(
+                    f"map image {path} is {width} x {height} px ({width * height / 1e6:.0f} M"
+                    f" pixels); at most {MAX_MAP_PIXELS / 1e6:.0f} M are read (draw it at a"
+                    " coarser scale and pass --scale)")
+            rgb = np.asarray(img.convert("RGB"), dtype=np.uint8)
+    except MapError:
+        raise
     except Exception as exc:  # Pillow raises several types for missing or bad files
         raise MapError(f"cannot read map image {path}: {exc}") from None
-    palette = np.array([WATER_RGB, ICE_RGB, ALGAE_RGB], dtype=np.int32)
-    dist = ((rgb[:, :, None, :] - palette[None, None, :, :]) ** 2).sum(axis=-1)
-    kind = dist.argmin(axis=-1)[::-1]  # flip: grid row 0 is the image's bottom row
+    kind = _nearest_colour(rgb)[::-1]  # flip: grid row 0 is the image's bottom row
     ice = kind != 0
     if not ice.any():
         raise MapError(f"map image {path} has no ice pixel (white or green)")

@@ -182,5 +182,10 @@ def test_cli_refuses_a_bad_fleet_without_a_traceback(tmp_path: Path) -> None:
     assert not (tmp_path / "out").exists()
     missing = btrack("deploy", "render", str(tmp_path / "nope.toml"), "--out", str(tmp_path))
     assert missing.returncode == 2 and "cannot read" in missing.stderr
+    latin = tmp_path / "latin1.toml"  # issue 19, item 6: was a UnicodeDecodeError traceback
+    latin.write_bytes('namespace = "a"\n# caf\u00e9\n'.encode("latin-1"))
+    res = btrack("deploy", "render", str(latin), "--out", str(tmp_path / "out"))
+    assert res.returncode == 2 and "Traceback" not in res.stderr
+    assert "latin1.toml:2: not UTF-8 text (byte 21" in res.stderr
     for args in (["deploy", "--help"], ["deploy", "render", "--help"], ["router", "--help"]):
         assert btrack(*args).returncode == 0
