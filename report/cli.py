@@ -60,6 +60,7 @@ ROWS = (
     ("loc_error_mean_m", "localisation error of the agents' poses, mean (m)"),
     ("loc_error_p95_m", "localisation error of the agents' poses, 95th percentile (m)"),
     ("ticks", "ticks recorded"),
+    ("ticks_expected", "ticks in the run"),
     ("invalid_messages", "invalid messages"),
     ("coverage_gap_m_s", "edge owned by no live agent, integrated (m s)"),
 )
@@ -71,6 +72,14 @@ def _fmt(value: Any) -> str:
     if isinstance(value, float):
         return f"{value:.4g}"
     return str(value)
+
+
+def _recording_note(summary: dict[str, Any]) -> list[str]:
+    """A warning paragraph when the recording does not hold the whole run."""
+    if summary.get("recording_complete", True):
+        return []
+    return [f"**This recording is incomplete**: {summary.get('recording_note')}. Every "
+            "measure below is of the part it holds.", ""]
 
 
 def _positions_note(source: Any) -> list[str]:
@@ -101,6 +110,7 @@ def report_markdown(
         "",
         head,
         "",
+        *_recording_note(summary),
         "| measure | value |",
         "| --- | --- |",
     ]
@@ -245,4 +255,7 @@ def main(argv: list[str] | None = None) -> int:
         f"(phase sse {_fmt(summary['phase_sse_rad'])} rad, "
         f"workload sse {_fmt(summary['workload_sse_m2'])} m^2)"
     )
+    if not summary.get("recording_complete", True):
+        print(f"btrack report: the recording is incomplete: {summary['recording_note']}",
+              file=sys.stderr)
     return 0

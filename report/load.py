@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import json
 from collections import defaultdict
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
+from mcap.exceptions import EndOfFile
 from mcap.reader import make_reader
+from mcap.records import Channel, Footer, Message
+from mcap.stream_reader import StreamReader
 
 STATE_FIELDS = ("t", "lo", "hi", "phase", "phase_des", "workload", "depth_avg", "direction",
                 "lower", "upper")
@@ -62,6 +66,9 @@ class RunData:
     odometry: dict[int, np.ndarray] = field(default_factory=dict)  # rows t, dist, dtheta
     # the edge's ends as the agents published them (a run with no world has no WorldInfo)
     agents_edge: tuple[float, float] | None = None
+    # why the file ends early (a recorder killed before it wrote the summary); "" when
+    # the file is whole
+    cut_short: str = ""
 
     @property
     def robot_ids(self) -> list[int]:
@@ -98,6 +105,39 @@ def _robot(topic: str) -> int | None:
     return int(parts[1]) if len(parts) >= 3 and parts[1].isdigit() else None
 
 
+def _messages(stream: BinaryIO, cut: list[str]) -> Iterator[tuple[Channel, Message]]:
+    """Every message of the MCAP ``stream`` with its channel, in file order. A file
+    without its summary (the recorder was killed: no footer, perhaps half a chunk at the
+    end) is read record by record as far as it is whole, and the damage is noted in
+    ``cut``."""
+    reader = make_reader(stream)
+    try:
+        summary = reader.get_summary()
+    except Exception:  # no footer, or a damaged one: read it as a stream
+        summary = None
+    if summary is not None:
+        for _schema, channel, message in reader.iter_messages(log_time_order=False):
+            yield channel, message
+        return
+    stream.seek(0)
+    channels: dict[int, Channel] = {}
+    try:
+        for record in StreamReader(stream, skip_magic=False, emit_chunks=False).records:
+            if isinstance(record, Channel):
+                channels[record.id] = record
+            elif isinstance(record, Message) and record.channel_id in channels:
+                yield channels[record.channel_id], record
+            elif isinstance(record, Footer):
+                return  # a whole file after all, without an index
+        end = "at the end of the file"
+    except EndOfFile:
+        end = "in a record cut off"
+    except Exception as exc:  # the first damaged record: the end of the data
+        end = f"in a damaged record ({type(exc).__name__})"
+    cut.append(f"the file has no summary (its recorder did not finish it) and its data "
+               f"end {end}")
+
+
 def load_run(path: str | Path) -> RunData:
     """Load ``path`` (a run.mcap, or a directory holding one); raise ``LoadError``."""
     path = Path(path)
@@ -116,10 +156,12 @@ def load_run(path: str | Path) -> RunData:
     odometry: dict[int, list[tuple[float, ...]]] = defaultdict(list)
     invalid = 0
     agents_edge: tuple[float, float] | None = None
+    cut: list[str] = []  # why the file ends early, if it does
+    read = 0
     try:
         with open(path, "rb") as stream:
-            reader = make_reader(stream)
-            for _schema, channel, message in reader.iter_messages(log_time_order=False):
+            for channel, message in _messages(stream, cut):
+                read += 1
                 topic = channel.topic
                 if topic.startswith("invalid/"):
                     invalid += 1
@@ -165,6 +207,8 @@ def load_run(path: str | Path) -> RunData:
         raise
     except Exception as exc:  # the mcap reader raises many types on a damaged file
         raise LoadError(f"cannot read {path}: {type(exc).__name__}: {exc}") from None
+    if cut and not read:
+        raise LoadError(f"cannot read {path}: not one whole message: {cut[0]}")
 
     tick_arr = np.asarray(ticks, dtype=float).reshape(-1, 2)
     order = np.argsort(tick_arr[:, 0], kind="stable")
@@ -185,4 +229,5 @@ def load_run(path: str | Path) -> RunData:
             for r, rows in odometry.items()
         },
         agents_edge=agents_edge,
+        cut_short=cut[0] if cut else "",
     )

@@ -60,6 +60,9 @@ KEYS = (
     "workload_q1_m2",
     "workload_q4_m2",
     "ticks",
+    "ticks_expected",
+    "recording_complete",
+    "recording_note",
     "invalid_messages",
     "coverage_gap_m_s",
     "faults",
@@ -225,6 +228,7 @@ def compute_summary(
         "workload_q1_m2": m.window_abs(s.t, s.workload, 0.0, 0.25)[0],
         "workload_q4_m2": m.window_abs(s.t, s.workload, 0.75, 1.0)[0],
         "ticks": int(run.tick_t.size),
+        **recording_completeness(run),
         "invalid_messages": int(run.invalid),
         "coverage_gap_m_s": _integral(s.t, gap),
         "faults": fault_measures(run, s, gap, workload_band, CONVERGE_SMOOTH_S),
@@ -235,6 +239,25 @@ def compute_summary(
     }
     assert set(out) == set(KEYS), set(out) ^ set(KEYS)
     return json_safe({key: out[key] for key in KEYS})
+
+
+def recording_completeness(run: RunData) -> dict[str, Any]:
+    """Whether the recording holds the whole run: its file is whole (``cut_short``) and
+    it has every tick the run was to have (its duration over its tick, from WorldInfo).
+    ``recording_note`` says what is missing, "" for nothing."""
+    info = run.info
+    expected = None
+    if info.get("duration_s") and info.get("dt"):
+        expected = int(round(float(info["duration_s"]) / float(info["dt"])))
+    ticks = int(run.tick_t.size)
+    notes = []
+    if run.cut_short:
+        last = f"t = {run.tick_t[-1]:.1f} s" if ticks else "no tick"
+        notes.append(f"cut short: {run.cut_short}; it holds the run up to {last}")
+    if expected is not None and ticks < expected:
+        notes.append(f"{ticks} of the run's {expected} ticks recorded")
+    return {"ticks_expected": expected, "recording_complete": not notes,
+            "recording_note": "; ".join(notes)}
 
 
 def write_summary(path: str | Path, summary: dict[str, Any]) -> None:

@@ -4,7 +4,9 @@ own code path, for tests and for trying the report without a simulator."""
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -15,8 +17,7 @@ from wire.messages import AgentState, Pose, Tick, Truth, WorldInfo
 TWO_PI = 2.0 * math.pi
 
 
-def write_synthetic_run(
-    run_dir: str | Path,
+def synthetic_messages(
     duration_s: float = 60.0,
     dt: float = 0.1,
     robots: int = 3,
@@ -29,8 +30,9 @@ def write_synthetic_run(
     phase_bias: tuple[float, ...] = (0.0,),
     hardware: bool = False,
     edge_wave_m: float = 0.0,
-) -> Path:
-    """Write ``run_dir``/run.mcap: each robot sweeps its equal segment in ``cycle_s`` with
+) -> Iterator[tuple[str, bytes, int]]:
+    """The messages of a synthetic run in the order a recorder would get them: (topic,
+    payload, wall clock ns). Each robot sweeps its equal segment in ``cycle_s`` with
     a phase offset decaying with time constant ``settle_s``, weaving across the local
     edge. Wall (log) time runs ``speedup`` times slower than simulation time.
     ``phase_bias``: added to the phase each robot publishes, as if its own pose
@@ -38,8 +40,6 @@ def write_synthetic_run(
     and their poses (as a localizer publishes them), with no world: no WorldInfo, Tick
     or ground truth. ``edge_wave_m``: the edge is y = edge_wave_m sin(2 pi x / 3 m) +
     edge_wave_m (recorded as WorldInfo.edge_y) instead of straight at y = 0."""
-    run_dir = Path(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
     edge_lo, edge_hi = edge
     bin_m = 0.1
     n_bins = round((edge_hi - edge_lo) / bin_m)
@@ -68,10 +68,8 @@ def write_synthetic_run(
     )
     bounds = np.linspace(edge_lo, edge_hi, robots + 1)
     wall0 = 1_700_000_000_000_000_000
-    writer = RunWriter(run_dir / "run.mcap", library="btrack synthetic")
-    rec = Recording(writer)
     if not hardware:
-        rec.handle("world/info", encode(info), wall0)
+        yield "world/info", encode(info), wall0
     steps = round(duration_s / dt)
     for k in range(steps + 1):
         t = k * dt
@@ -88,7 +86,7 @@ def write_synthetic_run(
             poses.append((x, y, 0.0))
             if hardware:
                 pose = Pose(t, k, i, x, y, 0.0, source="pf")
-                rec.handle(f"robot/{i}/pose", encode(pose), log_ns)
+                yield f"robot/{i}/pose", encode(pose), log_ns
             state = AgentState(
                 t=t,
                 k=k,
@@ -105,13 +103,24 @@ def write_synthetic_run(
                 edge_lo=edge_lo,
                 edge_hi=edge_hi,
             )
-            rec.handle(f"agent/{i}/state", encode(state), log_ns)
+            yield f"agent/{i}/state", encode(state), log_ns
         if k < garbage:
-            rec.handle("agent/0/state", b"\xc1 not msgpack", log_ns)
+            yield "agent/0/state", b"\xc1 not msgpack", log_ns
         if hardware:
             continue
-        rec.handle("world/truth", encode(Truth.of_team(t, k, poses)), log_ns)
+        yield "world/truth", encode(Truth.of_team(t, k, poses)), log_ns
         tick = Tick(t=t, k=k, live=list(range(robots)), done=k == steps)
-        rec.handle("world/tick", encode(tick), log_ns)
+        yield "world/tick", encode(tick), log_ns
+
+
+def write_synthetic_run(run_dir: str | Path, **kwargs: Any) -> Path:
+    """Write ``run_dir``/run.mcap through the recorder's own code: the messages of
+    ``synthetic_messages(**kwargs)``."""
+    run_dir = Path(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    writer = RunWriter(run_dir / "run.mcap", library="btrack synthetic")
+    rec = Recording(writer)
+    for topic, payload, log_ns in synthetic_messages(**kwargs):
+        rec.handle(topic, payload, log_ns)
     writer.close()
     return run_dir / "run.mcap"

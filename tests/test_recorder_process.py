@@ -185,3 +185,42 @@ def test_recorder_finishes_the_file_on_sigterm(tmp_path: Path) -> None:
         assert summary["done"] is False  # stopped before the final tick
     finally:
         end(proc)
+
+
+def test_a_sigkilled_recorders_file_is_reported_as_cut_short(tmp_path: Path) -> None:
+    """Issue 19, item 4: a recorder killed mid-run leaves an MCAP with no summary and half
+    a chunk; ``btrack report`` reads what it holds and says it was cut short (it could not
+    read such a file at all)."""
+    from report.synthetic import synthetic_messages
+
+    ns, port = unique_ns(), free_port()
+    keys = Keys(ns)
+    proc = start_recorder(tmp_path, ns, port)
+    try:
+        with bus_session(ns, port) as session:
+            wait_recorder_alive(session, keys)
+            sent_k = 0
+            for topic, payload, _ in synthetic_messages(duration_s=300.0):
+                session.put(f"{ns}/{topic}", payload)
+                if topic == "world/tick":
+                    sent_k += 1
+                    if sent_k == 2000:  # of 3001: the run is two thirds through
+                        break
+            ask_progress(session, keys, lambda p: p.k >= 1999)
+            proc.send_signal(signal.SIGKILL)
+            proc.wait(timeout=30)
+        done = subprocess.run([sys.executable, "-m", "btrack", "report", str(tmp_path)],
+                              capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0, done.stderr
+        assert "the recording is incomplete" in done.stderr and "Traceback" not in done.stderr
+        summary = json.loads((tmp_path / "summary.json").read_text())
+        assert summary["recording_complete"] is False
+        assert "no summary (its recorder did not finish it)" in summary["recording_note"]
+        assert summary["ticks_expected"] == 3000
+        # what was flushed to the file before the kill: whole chunks, most of the run
+        assert 500 < summary["ticks"] < 2000
+        assert f"{summary['ticks']} of the run's 3000 ticks recorded" in summary["recording_note"]
+        assert summary["phase_sse_rad"] is not None
+        assert "**This recording is incomplete**" in (tmp_path / "report.md").read_text()
+    finally:
+        end(proc)
