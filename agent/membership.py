@@ -81,6 +81,7 @@ class Membership(Generic[S]):
         self._live: set[int] = set()
         self._states: dict[int, dict[int, S]] = {}  # by neighbour, by tick
         self._followed_at: dict[int, int] = {}  # by neighbour: our last tick when it became one
+        self._mute: set[int] = set()  # neighbours waited for in vain, none of whose states came
         self._stage = Stage.JOINING
         self._last_k = -1  # the last tick acted on or stood still on
         self._deadline: float | None = None  # until when a tick waits (see ``decide``)
@@ -103,18 +104,24 @@ class Membership(Generic[S]):
         for rid in set(self._followed_at) - wanted:
             del self._followed_at[rid]
             del self._states[rid]
+            self._mute.discard(rid)
         for rid in wanted - set(self._followed_at):
             self._followed_at[rid] = self._last_k
             self._states[rid] = {}
 
     def heard(self, robot: int, k: int, state: S) -> bool:
         """Neighbour ``robot``'s state of its tick ``k``; whether it was kept. A state of a
-        robot that is not a neighbour (one sent before it stopped being one) is not."""
+        robot that is not a neighbour (one sent before it stopped being one) is not.
+        States more than ``HISTORY`` ticks before our own last tick are forgotten (not
+        before the newest state heard: one forged for a far tick must not push the
+        real ones out)."""
         hist = self._states.get(robot)
         if hist is None:
             return False
         hist[k] = state
-        for old in [kk for kk in hist if kk < k - HISTORY]:
+        self._mute.discard(robot)
+        ref = self._last_k if self._last_k >= 0 else k
+        for old in [kk for kk in hist if kk < ref - HISTORY]:
             del hist[old]
         return True
 
@@ -138,6 +145,10 @@ class Membership(Generic[S]):
                 self._deadline = now + self.neighbour_timeout_s
             if now < self._deadline:
                 return self._enter(Decision.WAIT, k)
+            # waited in vain: a neighbour that never sent a state is not waited for again
+            # until it does (a stray token, or a process up but not acting)
+            self._mute |= {rid for rid in self.neighbours()
+                           if rid is not None and not self._states[rid]}
         return self._enter(Decision.ACT, k)
 
     def _enter(self, decision: Decision, k: int) -> Decision:
@@ -158,6 +169,12 @@ class Membership(Generic[S]):
     def last_k(self) -> int:
         """The last tick acted on or stood still on; -1 before the first."""
         return self._last_k
+
+    @property
+    def mute(self) -> frozenset[int]:
+        """Live neighbours waited for in vain that have never sent a state: not waited
+        for again until one comes."""
+        return frozenset(self._mute)
 
     @property
     def live(self) -> frozenset[int]:
@@ -238,7 +255,7 @@ class Membership(Generic[S]):
         waits for its neighbours' states of k-1 or later: it claims a share of them."""
         need = k - 1 if self._last_k < 0 else min(k - 1, self._last_k)
         for rid in self.neighbours():
-            if rid is None or self._followed_at[rid] >= need:
+            if rid is None or self._followed_at[rid] >= need or rid in self._mute:
                 continue
             if max(self._states[rid], default=-1) < need:
                 return False

@@ -25,13 +25,16 @@ from typing import Any
 import zenoh
 
 from agent import config as agent_config
+from agent import plausible
 from agent.controller import Controller, Neighbour
 from agent.membership import HISTORY, Decision, Membership
 from agent.stability import check_gains
+from agent.team import passes_for
 from wire import AgentState, Cmd, DecodeError, Keys, Pose, Sense, decode, encode
 from wire.session import add_session_args, declare_publisher, open_session, options_from_args
 
 DEFAULT_LEASE_S = 1.0  # lease an agent announces unless told otherwise
+EARLY_STATES = 256  # neighbour states kept before our first sensing, at most
 MEMBERS_TIMEOUT_S = 2.0  # how long the start-up question "who is alive?" may take
 
 
@@ -81,7 +84,16 @@ class AgentNode:
         self.senses: dict[int, Sense] = {}
         self.poses: dict[int, Pose] = {}
         self.dropped = 0
+        self.rejected = 0
         self.ticks = 0
+        # What a neighbour's state is judged by (agent.plausible): the edge and limits, set
+        # from the first Sense; states heard before it wait in ``early``; our newest tick;
+        # our own recent claims by tick.
+        self.bounds: plausible.Bounds | None = None
+        self.early: list[tuple[str, AgentState]] = []
+        self.newest_k = -1
+        self.claims: dict[int, plausible.Claim] = {}
+        self.parked: dict[tuple[int, int], tuple[str, AgentState]] = {}  # (robot, k): ahead
         self.controller: Controller | None = None
         self.stopping = False
         self.pub_state = declare_publisher(session, keys.state(robot))
@@ -153,6 +165,14 @@ class AgentNode:
                     raise DecodeError(f"sense for robot {msg.robot}")
                 self.senses[msg.k] = msg
                 self._prune(self.senses)
+                if msg.k > self.newest_k:
+                    self.newest_k = msg.k
+                    self._unpark()
+                if self.bounds is None:
+                    self.bounds = self._bounds(msg)
+                    early, self.early = self.early, []
+                    for early_key, early_state in early:
+                        self._judge(early_key, early_state)
                 if msg.pose:  # the robot's pose came with its sensing
                     x, y, theta = msg.pose
                     self.poses[msg.k] = Pose(msg.t, msg.k, msg.robot, x, y, theta,
@@ -168,9 +188,63 @@ class AgentNode:
                 state = decode(AgentState, payload)
                 if Keys.robot_of(key) != state.robot:
                     raise DecodeError(f"state of robot {state.robot} on {key}")
-                self.membership.heard(state.robot, state.k, state)
+                self._judge(key, state)
         except DecodeError as exc:
             self._drop(key, str(exc))
+
+    def _judge(self, key: str, state: AgentState) -> None:
+        """A neighbour's well-formed state: kept if plausible (agent.plausible), else
+        counted, logged and dropped, as if it never came: the tick waits for the real one
+        as for a late state (a refused copy must not let it act without the real one)."""
+        if self.bounds is None:  # no sensing yet, so no edge or clock to judge it by
+            if len(self.early) < EARLY_STATES:
+                self.early.append((key, state))
+            return
+        why = plausible.state_problem(state, self.bounds, self.newest_k)
+        if why is not None:
+            self._reject(key, why)
+            return
+        if state.k > self.newest_k:
+            # A state of a tick whose sensing we do not have yet waits here until we do
+            # (a later copy replaces it: the real one comes after a forgery sent ahead of
+            # time) and is judged then, against its sender's previous state: a state sent
+            # early cannot stand in for the real one when the tick comes. Nothing acts on
+            # a neighbour's state of tick k before our own tick k+1.
+            if (state.robot, state.k) in self.parked or len(self.parked) < EARLY_STATES:
+                self.parked[(state.robot, state.k)] = (key, state)
+            return
+        lower, upper = self.membership.neighbours()
+        side = "lower" if state.robot == lower else "upper" if state.robot == upper else None
+        if side is not None:
+            before = self.membership.latest(state.robot, state.k - 1)
+            why = plausible.neighbour_problem(
+                state, self.robot, side, self.claims, before, self.gains.k_s,
+                self.gains.min_segment_m)
+            if why is not None:
+                self._reject(key, why)
+                return
+        self.membership.heard(state.robot, state.k, state)
+
+    def _unpark(self) -> None:
+        """Judge the states parked for ticks we have now come near, in tick order."""
+        due = sorted(rk for rk in self.parked if rk[1] <= self.newest_k)
+        for rk in due:
+            key, state = self.parked.pop(rk)
+            self._judge(key, state)
+
+    def _reject(self, key: str, why: str) -> None:
+        self.rejected += 1
+        if self.rejected <= 20 or self.rejected % 1000 == 0:
+            print(f"agent {self.robot}: refused state #{self.rejected} on {key}: {why}",
+                  file=sys.stderr, flush=True)
+
+    def _bounds(self, sense: Sense) -> plausible.Bounds:
+        p = self.patrol_cfg
+        edge = sense.edge_hi - sense.edge_lo
+        return plausible.Bounds(
+            sense.edge_lo, sense.edge_hi,
+            depth_max=p.max_depth_m + p.margin_out_m + p.max_search_m, bin_m=p.bin_m,
+            max_passes=passes_for(edge, p.max_spacing_m, p.passes_per_sweep))
 
     def _neighbour_view(self, rid: int | None, k: int) -> Neighbour | None:
         """The neighbour's state of tick k-1 (or the latest before k if that is missing)."""
@@ -270,6 +344,7 @@ class AgentNode:
             direction=out.direction, lower=-1 if lower_id is None else lower_id,
             upper=-1 if upper_id is None else upper_id,
             edge_lo=sense.edge_lo, edge_hi=sense.edge_hi, dropped=self.dropped,
+            rejected=self.rejected,
             turns=out.turns, end_bins=[b for b, _ in out.end_depths],
             end_depths=[d for _, d in out.end_depths],
             cycle_s=me.cycle_s, passes=me.passes, need_below=me.need_below,
@@ -280,6 +355,9 @@ class AgentNode:
         # anyone acts on k+1, however loaded the machine; the run stays deterministic.
         # (Command first was a few per cent faster, but under load a neighbour's state
         # could come after the neighbour timeout, and the run then depended on timing.)
+        self.claims[k] = plausible.Claim(out.lo, out.hi, out.workload)
+        for old in [kk for kk in self.claims if kk < k - HISTORY]:
+            del self.claims[old]
         self.pub_state.put(encode(state))
         self.pub_cmd.put(encode(Cmd(t=sense.t, k=k, robot=self.robot, v=out.v, omega=out.omega)))
         self.ticks += 1
@@ -320,6 +398,6 @@ def main(argv: list[str] | None = None) -> int:
             node.run()
         finally:
             node.close()
-            print(json.dumps({"agent": args.id, "ticks": node.ticks, "dropped": node.dropped}),
-                  flush=True)
+            print(json.dumps({"agent": args.id, "ticks": node.ticks, "dropped": node.dropped,
+                              "rejected": node.rejected}), flush=True)
     return 0

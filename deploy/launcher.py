@@ -52,6 +52,8 @@ MAX_ROBOTS = 100  # one machine's processes: beyond this a run fails slowly, not
 PROGRESS_QUERY_S = 0.5  # longest wait for the recorder's answer to a progress query
 BACKGROUND_NICE = 10  # the recorder (the team's router) is off the lockstep's path
 STARTUP_S = 60.0
+RECORDER_STALL_S = 30.0  # a recorder that has taken no tick for this long is stopped
+WORLD_DT_S = 0.1  # the world's tick; btrack sim does not change it
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -91,6 +93,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--passes", type=int,
                    help="at least this many passes per sweep of a segment (more on long ones)")
     p.add_argument("--ns", help="run namespace (default: a fresh one per run)")
+    p.add_argument("--port", type=int, metavar="PORT",
+                   help="the team's router listens on tcp/127.0.0.1:PORT (default: a free "
+                        "port); other tools join the run there (OUT/bus.json says where)")
     p.add_argument("--fault", action="append", default=[], metavar="SPEC",
                    help="inject a fault at a simulated time (repeatable): kill:I@T, "
                    "restart:I@T (after a kill), freeze:I@T1-T2 (SIGSTOP, then SIGCONT), "
@@ -173,6 +178,8 @@ class Injector:
         self.gone: set[int] = set()  # pids killed on purpose: not a failure
         self.starts: dict[int, int] = {}
         self.t = 0.0
+        self._last_k: int | None = None
+        self.refused = 0  # ticks refused as implausible
         self.wake = threading.Event()
         self.pub = declare_publisher(session, keys.fault())
         self._next_at = schedule[0].at_s if schedule else math.inf
@@ -182,11 +189,18 @@ class Injector:
 
     def _on_tick(self, sample: zenoh.Sample) -> None:
         try:
-            t = decode(Tick, sample.payload.to_bytes()).t
+            tick = decode(Tick, sample.payload.to_bytes())
         except DecodeError:
             return
-        self.t = max(self.t, t)
-        if t >= self._next_at:
+        # Only the next tick moves the clock the faults are timed by: a forged tick from
+        # the far future would fire every fault at once.
+        if (self._last_k is not None and tick.k != self._last_k + 1) or abs(
+                tick.t - tick.k * WORLD_DT_S) > 1e-6 * max(1.0, tick.t):
+            self.refused += 1
+            return
+        self._last_k = tick.k
+        self.t = max(self.t, tick.t)
+        if tick.t >= self._next_at:
             self.wake.set()
 
     def start_agent(self, agent: int) -> Child:
@@ -248,6 +262,8 @@ def refusal(args: argparse.Namespace, bodies: int) -> str | None:
     ``bodies`` is the team plus every id that joins."""
     if not 1 <= args.robots <= MAX_ROBOTS:
         return f"--robots must be between 1 and {MAX_ROBOTS}, not {args.robots}"
+    if args.port is not None and not 1 <= args.port <= 65535:
+        return f"--port must be between 1 and 65535, not {args.port}"
     if not (math.isfinite(args.duration) and args.duration > 0):
         return f"--duration must be a positive number of seconds, not {args.duration:g}"
     if args.ns is not None:
@@ -321,13 +337,14 @@ def run(args: argparse.Namespace) -> int:
         return 2
     ns = args.ns or f"btrack/sim-{os.getpid()}-{int(time.time() * 1000) % 10**9}"
     keys = Keys(ns)
-    port = free_port()
+    port = args.port if args.port is not None else free_port()
     # The recorder is the team's router (niced: it carries only what it records and
     # what the launcher, its client, hears). The processes of the lockstep (world,
     # agents, localizer) are peers that connect to it and link to each other directly,
     # one hop per message; every message reaches the recorder in one hop too, with no
     # router process forwarding to it (BENCHMARKS.md).
     hub = f"tcp/127.0.0.1:{port}"
+    (out / "bus.json").write_text(json.dumps({"ns": ns, "connect": hub}) + "\n")
     client = SessionOptions(ns=ns, mode="client", connect=(hub,), multicast=False)
     member = loopback_options(ns, port).to_args()
     group = ProcessGroup(out / "logs")
@@ -379,11 +396,16 @@ def run(args: argparse.Namespace) -> int:
             code = _watch(args, group, monitor, world, injector, recorder, vital)
             if code:
                 return code
-            try:
-                recorder.proc.wait(20)
-            except Exception:
-                pass
+            _wait_for_recorder(recorder, monitor)
             group.stop_all()
+            missing = _recording_missing(recorder, round(args.duration / WORLD_DT_S))
+            if missing:
+                print(f"\nbtrack sim: the recording is incomplete: {missing}; its log "
+                      f"{recorder.log_path}", file=sys.stderr)
+                return 1
+            if injector.refused:
+                print(f"btrack sim: {injector.refused} world ticks were refused as "
+                      "implausible (not the next tick)", file=sys.stderr)
     except KeyboardInterrupt as exc:
         return stop_interrupted(group, exc, "btrack sim")
     finally:
@@ -435,6 +457,44 @@ def _watch(args: argparse.Namespace, group: ProcessGroup, monitor: Monitor, worl
     if world.proc.returncode != 0:
         return _fail(group, world, "failed")
     return 0
+
+
+def _wait_for_recorder(recorder: Child, monitor: Monitor) -> None:
+    """Wait for the recorder to write the run's last tick and end by itself, as long as
+    it is getting on: a recorder lagging under load is waited for, not cut off; one that
+    has stopped getting on for ``RECORDER_STALL_S`` is stopped (it finishes its file)."""
+    last_k, last_move = -1, time.monotonic()
+    while recorder.alive():
+        try:
+            recorder.proc.wait(1.0)
+            return
+        except Exception:
+            pass
+        monitor.ask()
+        k = monitor.progress.k if monitor.progress is not None else -1
+        if k > last_k:
+            last_k, last_move = k, time.monotonic()
+        elif time.monotonic() - last_move > RECORDER_STALL_S:
+            print(f"\nbtrack sim: the recorder made no progress for {RECORDER_STALL_S:g} s "
+                  f"(at tick {last_k}); stopping it", file=sys.stderr)
+            return
+
+
+def _recording_missing(recorder: Child, total: int) -> str:
+    """What the recording lacks of a run of ``total`` ticks, from the recorder's own
+    count; "" if nothing."""
+    try:
+        lines = recorder.stdout_path.read_text().strip().splitlines()
+        counts = json.loads(lines[-1]) if lines else {}
+    except (OSError, ValueError):
+        counts = {}
+    if not counts:
+        return f"the recorder gave no count (exit code {recorder.proc.returncode})"
+    ticks = int(counts.get("ticks", 0))
+    if ticks < total or not counts.get("done"):
+        return (f"it holds {ticks} of the run's {total} ticks"
+                + ("" if counts.get("done") else ", not the final one"))
+    return ""
 
 
 def _finished(recorder: Child) -> bool:

@@ -11,6 +11,7 @@ from typing import Any
 from wire import messages
 
 INVALID_PREFIX = "invalid/"
+REJECTED_PREFIX = "rejected/"  # well formed but implausible (forged or broken): see writer
 ALIVE_PREFIX = "alive/agent/"
 
 _ROBOT_TOPICS: dict[tuple[str, str], type] = {

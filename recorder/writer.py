@@ -15,9 +15,10 @@ from typing import Any, BinaryIO
 import msgpack
 from mcap.writer import CompressionType, Writer
 
+from agent import plausible
 from recorder import topics
 from wire.codec import DecodeError, decode
-from wire.messages import AgentState, Progress, Tick
+from wire.messages import AgentState, Progress, Tick, WorldInfo
 
 _dumps = json.JSONEncoder(separators=(",", ":"), allow_nan=False).encode
 
@@ -64,7 +65,21 @@ class RunWriter:
             self._stream.close()
 
 
-RECENT_TICKS = 8  # each robot's states kept, by tick, for progress
+RECENT_TICKS = 8
+REALTIME_END_SLACK_TICKS = 10
+# The recorder hears the world's ticks and the agents' states on different links, and
+# under load one link can be read seconds behind another: only a tick this far from the
+# last Tick is refused (a state of tick 10^9, not one of a busy second).
+RECORDER_WINDOW_TICKS = 10_000
+DEPTH_SLACK_M = 1.0  # an agent's depth may be this much deeper than the true deepest
+
+
+def _robot_of(topic: str) -> int | None:
+    """The robot id of ``alive/agent/ID``, None for another topic."""
+    if not topic.startswith(topics.ALIVE_PREFIX):
+        return None
+    rest = topic[len(topics.ALIVE_PREFIX):]
+    return int(rest) if rest.isdigit() else None  # each robot's states kept, by tick, for progress
 
 
 class Recording:
@@ -74,6 +89,10 @@ class Recording:
         self.writer = writer
         self.messages = 0
         self.invalid = 0
+        self.rejected = 0  # well formed but implausible: recorded under rejected/
+        self.ticks = 0  # Ticks recorded
+        self.info: WorldInfo | None = None  # the run's first WorldInfo
+        self.last_tick: Tick | None = None
         self.done = False  # a Tick with done=True has been written
         self.last_t_ns = 0  # the latest simulation time seen, for messages without one
         self._routes: dict[str, tuple[type | None, int]] = {}
@@ -107,6 +126,10 @@ class Recording:
         except DecodeError as exc:
             self.record_invalid(topic, str(exc), payload, log_ns)
             return
+        why = self._implausible(msg)
+        if why is not None:
+            self.record_invalid(topic, why, payload, log_ns, topics.REJECTED_PREFIX)
+            return
         fields: dict[str, Any] = msg.__dict__
         t = fields.get("t")
         if t is not None:
@@ -116,6 +139,7 @@ class Recording:
         self.writer.add(cid, _dumps(fields).encode(), log_ns, publish_ns)
         self.messages += 1
         if cls is Tick:
+            self.ticks += 1
             self._note_tick(msg)
         elif cls is AgentState:
             recent = self._recent.setdefault(msg.robot, {})
@@ -123,7 +147,42 @@ class Recording:
             for old in [k for k in recent if k < msg.k - RECENT_TICKS]:
                 del recent[old]
 
+    def _implausible(self, msg: Any) -> str | None:
+        """Why a well-formed message cannot be the run's own (agent.plausible for the
+        world's clock and the agents' states), None if it can be: the recording and the
+        report must not take a forged final tick or a state from the future as true."""
+        if isinstance(msg, WorldInfo):
+            if self.info is None:
+                self.info = msg
+            elif (msg.edge_lo, msg.edge_hi, msg.dt) != (
+                    self.info.edge_lo, self.info.edge_hi, self.info.dt):
+                return "a second world with another edge or tick"
+            return None
+        info = self.info
+        if isinstance(msg, Tick):
+            last = self.last_tick.k if self.last_tick else None
+            if last is not None and msg.k != last + 1:
+                return f"tick {msg.k} after tick {last}: not the next one"
+            if info is not None:
+                if abs(msg.t - msg.k * info.dt) > 1e-6 * max(1.0, msg.t):
+                    return f"t = {msg.t:g} s is not tick {msg.k} of {info.dt:g} s"
+                final = round(info.duration_s / info.dt) - 1
+                # A world on the wall clock ends when its time is up: near, not at, it.
+                slack = REALTIME_END_SLACK_TICKS if info.realtime else 0
+                if msg.done and msg.k < final - slack:
+                    return f"done at tick {msg.k}; the run's last tick is {final}"
+            return None
+        if isinstance(msg, AgentState) and info is not None:
+            deepest = max(info.patrol_depth, default=0.0) + DEPTH_SLACK_M
+            bounds = plausible.Bounds(info.edge_lo, info.edge_hi, deepest, info.bin_m,
+                                      plausible.NO_PASS_LIMIT)
+            newest = self.last_tick.k if self.last_tick else None
+            return plausible.state_problem(msg, bounds, newest, RECORDER_WINDOW_TICKS,
+                                           RECORDER_WINDOW_TICKS)
+        return None
+
     def _note_tick(self, tick: Tick) -> None:
+        self.last_tick = tick
         if tick.done:
             self.done = True
         states = {}
@@ -145,14 +204,27 @@ class Recording:
         self.writer.add(cid, data, log_ns, self.last_t_ns)
         self.messages += 1
 
-    def record_invalid(self, topic: str, reason: str, payload: bytes, log_ns: int) -> None:
-        cid = self.writer.channel(topics.INVALID_PREFIX + topic, "invalid", topics.INVALID_SCHEMA)
+    def record_invalid(self, topic: str, reason: str, payload: bytes, log_ns: int,
+                       prefix: str = topics.INVALID_PREFIX) -> None:
+        """Store a message that is malformed (``invalid/``) or implausible (``rejected/``)
+        with the reason, apart from the run's own."""
+        cid = self.writer.channel(prefix + topic, "invalid", topics.INVALID_SCHEMA)
         data = _dumps({"error": reason, "hex": bytes(payload[:64]).hex()}).encode()
         self.writer.add(cid, data, log_ns, self.last_t_ns)
-        self.invalid += 1
+        if prefix == topics.INVALID_PREFIX:
+            self.invalid += 1
+        else:
+            self.rejected += 1
 
     def handle_alive(self, topic: str, alive: bool, log_ns: int) -> None:
-        """Record a liveliness token appearing or going away on ``topic``."""
+        """Record a liveliness token appearing or going away on ``topic``; one of a
+        robot the world does not have is recorded as rejected."""
+        robot = _robot_of(topic)
+        if (robot is not None and self.info is not None and not 0 <= robot < self.info.robots
+                and alive):
+            self.record_invalid(topic, f"no robot {robot} in this run (0..{self.info.robots - 1})",
+                                b"", log_ns, topics.REJECTED_PREFIX)
+            return
         cid = self.writer.channel(topic, "alive", topics.ALIVE_SCHEMA)
         self.writer.add(cid, _dumps({"alive": alive}).encode(), log_ns, self.last_t_ns)
         self.messages += 1
@@ -168,4 +240,7 @@ class Recording:
                         [states[r].phase for r in robots], [states[r].workload for r in robots])
 
     def summary(self) -> dict[str, int]:
-        return {"messages": self.messages, "invalid": self.invalid, "done": self.done}
+        last = self.last_tick
+        return {"messages": self.messages, "invalid": self.invalid, "rejected": self.rejected,
+                "done": self.done, "ticks": self.ticks,
+                "last_k": -1 if last is None else last.k}

@@ -62,6 +62,7 @@ ROWS = (
     ("ticks", "ticks recorded"),
     ("ticks_expected", "ticks in the run"),
     ("invalid_messages", "invalid messages"),
+    ("rejected_messages", "messages refused as implausible (recorder, agents, world)"),
     ("coverage_gap_m_s", "edge owned by no live agent, integrated (m s)"),
 )
 

@@ -69,6 +69,11 @@ class RunData:
     # why the file ends early (a recorder killed before it wrote the summary); "" when
     # the file is whole
     cut_short: str = ""
+    # well-formed messages the recorder refused as implausible, by topic (not measured)
+    rejected: dict[str, int] = field(default_factory=dict)
+    # what each part counted as dropped (malformed) and rejected (implausible): the
+    # recorder by topic, each agent (its last state's counts) and the world (its last tick's)
+    refused: dict[str, Any] = field(default_factory=dict)
 
     @property
     def robot_ids(self) -> list[int]:
@@ -98,6 +103,15 @@ def _columns(rows: list[tuple[float, ...]], names: tuple[str, ...]) -> dict[str,
     arr = np.asarray(rows, dtype=float).reshape(-1, len(names))
     arr = arr[np.argsort(arr[:, 0], kind="stable")]
     return {name: arr[:, j].copy() for j, name in enumerate(names)}
+
+
+def _last_of_each_time(cols: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Of rows sorted by time, the last one of each time: a state sent again for the same
+    tick replaces the earlier one (a forgery sent ahead of its tick comes first)."""
+    t = cols["t"]
+    keep = np.ones(t.size, dtype=bool)
+    keep[:-1] = t[1:] != t[:-1]
+    return {name: arr[keep] for name, arr in cols.items()}
 
 
 def _robot(topic: str) -> int | None:
@@ -155,6 +169,9 @@ def load_run(path: str | Path) -> RunData:
     poses: dict[int, list[tuple[float, ...]]] = defaultdict(list)
     odometry: dict[int, list[tuple[float, ...]]] = defaultdict(list)
     invalid = 0
+    rejected: dict[str, int] = {}
+    agent_counts: dict[int, tuple[int, int]] = {}
+    world_counts = (0, 0)
     agents_edge: tuple[float, float] | None = None
     cut: list[str] = []  # why the file ends early, if it does
     read = 0
@@ -166,10 +183,15 @@ def load_run(path: str | Path) -> RunData:
                 if topic.startswith("invalid/"):
                     invalid += 1
                     continue
+                if topic.startswith("rejected/"):
+                    rest = topic[len("rejected/"):]
+                    rejected[rest] = rejected.get(rest, 0) + 1
+                    continue
                 if topic == "world/tick":
                     msg = json.loads(message.data)
                     # the world's own wall clock when it has one, else the recorder's
                     ticks.append((msg["t"], msg.get("wall_ns") or message.log_time))
+                    world_counts = (msg.get("dropped", 0), msg.get("rejected", 0))
                     live.append(sorted(int(r) for r in msg.get("live", [])))
                 elif topic == "fault":
                     msg = json.loads(message.data)
@@ -186,6 +208,8 @@ def load_run(path: str | Path) -> RunData:
                 elif topic.endswith("/state") and topic.startswith("agent/"):
                     msg = json.loads(message.data)
                     states[int(msg["robot"])].append(tuple(msg[f] for f in STATE_FIELDS))
+                    agent_counts[int(msg["robot"])] = (msg.get("dropped", 0),
+                                                      msg.get("rejected", 0))
                     agents_edge = (msg["edge_lo"], msg["edge_hi"])
                 elif topic.endswith("/pose") and topic.startswith("robot/"):
                     msg = json.loads(message.data)
@@ -220,7 +244,8 @@ def load_run(path: str | Path) -> RunData:
         tick_live=[live[i] for i in order],
         faults=sorted(faults, key=lambda f: (f["t"], f["log_ns"])),
         truth={r: Truth(**_columns(rows, TRUTH_FIELDS)) for r, rows in truth.items()},
-        states={r: States(**_columns(rows, STATE_FIELDS)) for r, rows in states.items()},
+        states={r: States(**_last_of_each_time(_columns(rows, STATE_FIELDS)))
+                for r, rows in states.items()},
         invalid=invalid,
         alive={r: sorted(ev) for r, ev in alive.items()},
         poses={r: Truth(**_columns(rows, TRUTH_FIELDS)) for r, rows in poses.items()},
@@ -230,4 +255,9 @@ def load_run(path: str | Path) -> RunData:
         },
         agents_edge=agents_edge,
         cut_short=cut[0] if cut else "",
+        rejected=rejected,
+        refused={"recorder_rejected": dict(sorted(rejected.items())),
+                 "agents_dropped": {str(r): c[0] for r, c in sorted(agent_counts.items())},
+                 "agents_rejected": {str(r): c[1] for r, c in sorted(agent_counts.items())},
+                 "world_dropped": world_counts[0], "world_rejected": world_counts[1]},
     )

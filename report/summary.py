@@ -64,6 +64,8 @@ KEYS = (
     "recording_complete",
     "recording_note",
     "invalid_messages",
+    "rejected_messages",
+    "refused",
     "coverage_gap_m_s",
     "faults",
     "loc_error_mean_m",
@@ -230,6 +232,11 @@ def compute_summary(
         "ticks": int(run.tick_t.size),
         **recording_completeness(run),
         "invalid_messages": int(run.invalid),
+        # well-formed messages refused as implausible by the recorder, agents and world
+        "rejected_messages": (sum(run.rejected.values())
+                              + sum(run.refused.get("agents_rejected", {}).values())
+                              + int(run.refused.get("world_rejected", 0))),
+        "refused": run.refused,
         "coverage_gap_m_s": _integral(s.t, gap),
         "faults": fault_measures(run, s, gap, workload_band, CONVERGE_SMOOTH_S),
         "loc_error_mean_m": loc_mean,

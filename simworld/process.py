@@ -177,6 +177,12 @@ class WorldProcess:
         self.keys = Keys(args.ns)
         self.events: queue.SimpleQueue[tuple[str, str, Any]] = queue.SimpleQueue()
         self.live: set[int] = set()
+        # Live agents that have sent no command since their token came up, and timed out
+        # once: not waited for again until they send one (a stray token of an id in
+        # range, or a process that is up but does not act, must not stall every tick).
+        self.mute: set[int] = set()
+        self.silent: set[int] = set()
+        self.rejected = 0  # well-formed but implausible input: foreign tokens
         self.recorder_alive = False
         self.localizer_alive = False
         self.laser: Laser | None = None
@@ -247,15 +253,23 @@ class WorldProcess:
             if cmd.robot != Keys.robot_of(key) or not 0 <= cmd.robot < self.n:
                 self._drop(key, f"robot {cmd.robot} on this key")
                 return None
+            self.mute.discard(cmd.robot)
             return cmd
         if kind == _ALIVE:
             robot = Keys.robot_of(key)
             if robot is not None and 0 <= robot < self.n:
                 if value:
                     self.live.add(robot)
+                    self.mute.add(robot)  # until its first command
                 else:
                     self.live.discard(robot)
+                    self.mute.discard(robot)
+                    self.silent.discard(robot)
                 log.info("agent %d %s", robot, "alive" if value else "gone")
+            elif value:  # a token for a robot this world does not have: never waited for
+                self.rejected += 1
+                log.warning("refused a liveliness token %s: no such robot here (0..%d)",
+                            key, self.n - 1)
         elif kind == _RECORDER:
             self.recorder_alive = bool(value)
         elif kind == _LOCALIZER:
@@ -349,7 +363,7 @@ class WorldProcess:
             if k and k % INFO_EVERY_TICKS == 0:
                 self.publish_info()
             self.publish_sensing(k, t)
-            pending = set(self.live)
+            pending = self.live - self.silent
             cmds: dict[int, tuple[float, float]] = {}
             began = time.monotonic()
             deadline = began + timeout
@@ -362,8 +376,15 @@ class WorldProcess:
                     log.warning(
                         "tick %d: no command from %s in %.1f s", k, sorted(pending), timeout
                     )
+                    never = pending & self.mute
+                    if never:
+                        self.silent |= never
+                        log.warning("agents %s are alive but have never sent a command: "
+                                    "not waited for until they do", sorted(never))
                     break
                 cmd = self._handle(item)
+                if cmd is not None:
+                    self.silent.discard(cmd.robot)
                 if cmd is not None and cmd.k == k:
                     cmds[cmd.robot] = (cmd.v, cmd.omega)
                     pending.discard(cmd.robot)
@@ -374,7 +395,7 @@ class WorldProcess:
             waited_ms = (time.monotonic() - began) * 1000.0
             live = sorted(self.live)
             self.pub_tick.put(encode(Tick(t, k, live, waited_ms, k == total - 1,
-                                          time.time_ns())))
+                                          time.time_ns(), self.dropped, self.rejected)))
             world.step({i: c for i, c in cmds.items() if i in self.live}, dt)
             self._hold(t)
             k += 1
@@ -430,7 +451,7 @@ class WorldProcess:
             }
             waited_ms = (now - began) * 1000.0
             self.pub_tick.put(encode(Tick(t, k, sorted(self.live), waited_ms, k == total - 1,
-                                          time.time_ns())))
+                                          time.time_ns(), self.dropped, self.rejected)))
             world.step(cmds, dt)
             k += 1
         return k
@@ -523,6 +544,7 @@ def main(argv: list[str] | None = None) -> int:
             "wall_s": round(wall, 3),
             "speedup": round(ticks * args.dt / wall, 1) if wall > 0 else None,
             "dropped": proc.dropped,
+            "rejected": proc.rejected,
             "timeouts": proc.timeouts,
             "interrupted": proc.stopping,
         }

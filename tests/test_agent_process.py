@@ -30,8 +30,9 @@ def bus():
 
 def neighbour_state(robot: int, k: int, lo: float, hi: float) -> AgentState:
     return AgentState(t=k * 0.1, k=k, robot=robot, lo=lo, hi=hi, phase=0.1, phase_des=0.1,
-                      workload=0.6, depth_avg=0.3, direction=1, lower=-1 if robot == 0 else 1,
-                      upper=-1 if robot == 2 else 1, edge_lo=0.0, edge_hi=6.0)
+                      workload=0.3 * (hi - lo), depth_avg=0.3, direction=1,
+                      lower=-1 if robot == 0 else 1, upper=-1 if robot == 2 else 1,
+                      edge_lo=0.0, edge_hi=6.0)
 
 
 @contextmanager

@@ -117,10 +117,38 @@ def test_a_wait_keeps_its_deadline_over_ticks_and_acts_at_it():
     """With hardware tick k+1's sensing often comes before tick k's pose: the wait
     begun at tick k runs on, it does not start again."""
     m = started(1, 3, 0, 2)
-    assert m.decide(1, 5.0) is WAIT and m.deadline == pytest.approx(5.3)
-    assert m.decide(2, 5.2) is WAIT and m.deadline == pytest.approx(5.3)
-    assert m.decide(2, 5.3) is ACT and (m.last_k, m.deadline) == (2, None)
-    assert m.decide(3, 5.4) is WAIT and m.deadline == pytest.approx(5.7)  # a new wait
+    m.heard(0, 0, seg(0.0, 2.0))
+    m.heard(2, 0, seg(4.0, 6.0))
+    assert m.decide(1, 4.0) is ACT
+    assert m.decide(2, 5.0) is WAIT and m.deadline == pytest.approx(5.3)
+    assert m.decide(3, 5.2) is WAIT and m.deadline == pytest.approx(5.3)
+    assert m.decide(3, 5.3) is ACT and (m.last_k, m.deadline) == (3, None)
+    assert m.decide(4, 5.4) is WAIT and m.deadline == pytest.approx(5.7)  # a new wait
+
+
+def test_a_live_neighbour_that_never_sent_a_state_is_waited_for_once():
+    """Issue 19, item 3: a stray token (or a process up but not acting) cost every tick
+    a full wait. It is waited for once; once a state of it comes, as any neighbour."""
+    m = started(1, 3, 0, 2)
+    m.alive(2, False)  # robot 1 is the top of the chain now
+    m.heard(0, 0, seg(0.0, 3.0))
+    assert m.decide(1, 1.0) is ACT
+    m.alive(7, True)  # a token of an id nobody runs
+    assert m.neighbours() == (0, 7)
+    m.heard(0, 1, seg(0.0, 3.0))
+    assert m.decide(2, 2.0) is ACT  # it became a neighbour after tick 1: not waited for
+    m.heard(0, 2, seg(0.0, 3.0))
+    assert m.decide(3, 3.0) is WAIT
+    assert m.decide(3, 3.3) is ACT and m.mute == {7}  # waited in vain once
+    for k in range(4, 10):
+        m.heard(0, k - 1, seg(0.0, 3.0))
+        assert m.decide(k, 3.3 + 0.01 * k) is ACT
+    m.heard(7, 9, seg(3.0, 6.0))  # it speaks after all: a neighbour like any other
+    assert not m.mute
+    m.heard(0, 9, seg(0.0, 3.0))
+    assert m.decide(10, 4.0) is ACT
+    m.heard(0, 10, seg(0.0, 3.0))
+    assert m.decide(11, 4.1) is WAIT
 
 
 def test_after_skipped_ticks_it_waits_for_the_states_of_its_own_last_tick():
@@ -140,7 +168,13 @@ def test_only_recent_states_of_current_neighbours_are_kept():
     m = started(1, 4, 0, 2)
     for k in range(20):
         assert m.heard(0, k, seg(0.0, 2.0 + 0.01 * k))
+        assert m.heard(2, k, seg(3.0, 4.0))
+        assert m.decide(k + 1, 0.1 * k) is ACT
+    # kept: HISTORY ticks before our own last one when the state came (19)
     assert m.latest(0, 19 - HISTORY) is not None and m.latest(0, 18 - HISTORY) is None
+    # a state far in the future (a forgery) pushes none of them out
+    assert m.heard(0, 10**9, seg(0.0, 5.9))
+    assert m.latest(0, 19) == seg(0.0, 2.19)
     assert not m.heard(3, 5, seg(4.0, 6.0))  # not alive to us: not a neighbour
     assert m.latest(3, 99) is None
 

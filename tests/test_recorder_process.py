@@ -122,7 +122,7 @@ def test_recorder_records_and_stops_on_final_tick(tmp_path: Path) -> None:
                 robots=1,
                 localization="truth",
                 seed=1,
-                duration_s=0.3,
+                duration_s=0.4,
                 dt=0.1,
                 edge_lo=0.0,
                 edge_hi=6.0,
@@ -147,7 +147,8 @@ def test_recorder_records_and_stops_on_final_tick(tmp_path: Path) -> None:
             token.undeclare()
         assert proc.returncode == 0, err.decode()
         summary = json.loads(out.decode().strip().splitlines()[-1])
-        assert summary == {"messages": 12, "invalid": 1, "done": True}
+        assert summary == {"messages": 12, "invalid": 1, "rejected": 0, "done": True,
+                           "ticks": 4, "last_k": 3}
         counts, data = read_topics(tmp_path / "run.mcap")
         assert counts["world/info"] == 1
         assert counts["world/truth"] == 3

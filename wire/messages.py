@@ -164,6 +164,8 @@ class AgentState:
     edge_lo: float
     edge_hi: float
     dropped: int = 0  # malformed messages this agent has counted and dropped so far
+    # well-formed neighbour states it refused as implausible so far (agent.plausible)
+    rejected: int = 0
     # phi_des unwrapped, rad: the team's count of sweeps, which sets the grid of pass
     # lines every robot shares; a robot takes its lower neighbour's
     turns: float = 0.0
@@ -191,7 +193,7 @@ class AgentState:
         span = self.edge_hi - self.edge_lo
         _require(0.0 <= self.span_below <= span and 0.0 <= self.span_above <= span,
                  "segment span outside [0, the edge's length]")
-        _require(self.dropped >= 0, "negative dropped count")
+        _require(self.dropped >= 0 and self.rejected >= 0, "negative dropped or rejected count")
         _require(len(self.end_bins) == len(self.end_depths),
                  "end_bins and end_depths must be as long as each other")
         _require(all(d >= 0 for d in self.end_depths), "negative depth")
@@ -216,9 +218,14 @@ class Tick:
     # given. Speed and wall-time delays are measured on it, not on when a (possibly
     # lagging) recorder took the message.
     wall_ns: int = 0
+    # the world's counts so far of the input it dropped as malformed and refused as
+    # implausible (tokens of robots it does not have)
+    dropped: int = 0
+    rejected: int = 0
 
     def check(self) -> None:
         _require(self.t >= 0 and self.k >= 0 and self.wall_ns >= 0, "negative t, k or wall_ns")
+        _require(self.dropped >= 0 and self.rejected >= 0, "negative dropped or rejected")
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,141 @@
+"""What a neighbour may claim: plausibility rules for a well-formed ``AgentState``.
+
+The codec refuses what is malformed (types, ranges, non-finite numbers); these rules
+refuse what is well formed but cannot be true, so one forged or broken state cannot
+push a robot off its segment, stall the lockstep or poison the workload for the rest of
+a run (issue 19). Two layers, both pure:
+
+- ``state_problem``: what any listener can check alone (an agent, the recorder): the
+  tick within a window of the listener's own clock, the edge the listener knows, depths
+  no patrol can measure, a workload that is not the depth times the segment.
+- ``neighbour_problem``: what only the neighbour sharing a boundary can check, against
+  its own previous state and the sender's: the shared boundary where the workload law
+  (eq. 4.3, ``shared_boundary``) can put it in one tick, never past the middle of the
+  listener's own segment.
+
+The sweep count (``turns``) is not judged: it jumps, rightly, whenever a robot's lower
+neighbour changes (it takes the new one's count), and that jump runs up the chain.
+
+Each returns None for a plausible state, else the rule it breaks (for the count and the
+log). A state refused is dropped as if it never came: the tick waits for the real one
+as for a late state (so a refused copy cannot make it act without the real one).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from agent.partition import SegmentView, shared_boundary
+from wire.messages import AgentState
+
+MAX_AHEAD_TICKS = 10  # a neighbour's state this many ticks past our newest sensing, at most
+MAX_BEHIND_TICKS = 64  # and no older than this (nobody acts on it)
+TOL_M = 1e-6  # boundaries: rounding between two robots evaluating the same law
+NO_PASS_LIMIT = 1 << 30  # for a listener that does not know the patrol's spacing
+
+
+@dataclass(frozen=True)
+class Bounds:
+    """What the listener knows for sure: the edge (from its own sensing), the deepest
+    depth a patrol can measure (its patrol's ``max_depth_m`` plus its margins), the bin
+    of the depth maps and the most passes per sweep a team on this edge can need."""
+
+    edge_lo: float
+    edge_hi: float
+    depth_max: float
+    bin_m: float
+    max_passes: int
+
+    @property
+    def bins(self) -> int:
+        return math.ceil((self.edge_hi - self.edge_lo) / self.bin_m - 1e-9)
+
+
+@dataclass(frozen=True)
+class Claim:
+    """A robot's own published segment and workload at one tick."""
+
+    lo: float
+    hi: float
+    workload: float
+
+
+def state_problem(s: AgentState, bounds: Bounds, newest_k: int | None,
+                  ahead: int = MAX_AHEAD_TICKS, behind: int = MAX_BEHIND_TICKS) -> str | None:
+    """The rules any listener checks; ``newest_k`` is the listener's newest tick (None if
+    it has none yet: the window is not checked), ``ahead`` and ``behind`` the window
+    (a listener whose clock comes on another link than the states, as the recorder's,
+    needs a wide one: the bus orders messages per publisher only)."""
+    if newest_k is not None:
+        if s.k > newest_k + ahead:
+            return f"tick {s.k} is more than {ahead} ahead of ours ({newest_k})"
+        if s.k < newest_k - behind:
+            return f"tick {s.k} is more than {behind} behind ours ({newest_k})"
+    if abs(s.edge_lo - bounds.edge_lo) > TOL_M or abs(s.edge_hi - bounds.edge_hi) > TOL_M:
+        return (f"edge [{s.edge_lo:g}, {s.edge_hi:g}] is not ours "
+                f"[{bounds.edge_lo:g}, {bounds.edge_hi:g}]")
+    if s.depth_avg > bounds.depth_max:
+        return f"mean depth {s.depth_avg:g} m is deeper than any patrol ({bounds.depth_max:g} m)"
+    if any(d > bounds.depth_max for d in s.end_depths):
+        return f"a depth of its ends is deeper than any patrol ({bounds.depth_max:g} m)"
+    if any(not 0 <= b < bounds.bins for b in s.end_bins):
+        return f"a bin of its ends is off the edge's {bounds.bins} bins"
+    span = s.hi - s.lo
+    if abs(s.workload - s.depth_avg * span) > 1e-6 * max(1.0, s.workload):
+        return (f"workload {s.workload:g} m^2 is not its mean depth times its segment "
+                f"({s.depth_avg * span:g} m^2)")
+    if s.passes > bounds.max_passes:
+        return f"{s.passes} passes per sweep; this edge needs at most {bounds.max_passes}"
+    return None
+
+
+def neighbour_problem(s: AgentState, me: int, side: str, mine: dict[int, Claim],
+                      theirs_before: AgentState | None, k_s: float,
+                      min_segment_m: float) -> str | None:
+    """The rules only a neighbour checks. ``me``: the listener's id; ``side``: "lower" if
+    the sender is the listener's lower neighbour, "upper" if its upper one; ``mine``:
+    the listener's own recent claims by tick; ``theirs_before``: the sender's latest
+    state before ``s`` as heard, None if none.
+
+    Where the sender names the listener on that side and its state of tick k-1 is here,
+    the boundary they share must be where the law puts it from the two states of k-1
+    (or of k-2, k-3 if it acted on an older one of ours), or where it was (it had not
+    heard us in time). A sender that names no neighbour on the listener's side owns the
+    edge to its end by the law (it has lost sight of the listener, after a freeze: the
+    two then meet in the middle), and may claim exactly that. Otherwise it may not reach
+    past the middle of the listener's latest segment (a quarter further for a robot just
+    joining, which split from a slightly older one of ours)."""
+    ks = [k for k in mine if k <= s.k - 1]
+    if not ks:
+        return None
+    lower = side == "lower"
+    shared = s.hi if lower else s.lo
+    names_me = (s.upper if lower else s.lower) == me
+    before = theirs_before
+    if names_me and before is not None and before.k == s.k - 1:
+        kept = before.hi if lower else before.lo
+        if abs(shared - kept) <= TOL_M:
+            return None  # it kept the boundary: it had not heard us in time
+        theirs = SegmentView(before.lo, before.hi, before.workload)
+        expected = []
+        for k in sorted(ks)[-3:]:
+            c = mine[k]
+            ours = SegmentView(c.lo, c.hi, c.workload)
+            expected.append(shared_boundary(theirs, ours, k_s, min_segment_m) if lower
+                            else shared_boundary(ours, theirs, k_s, min_segment_m))
+        if any(abs(shared - e) <= TOL_M for e in expected):
+            return None
+        return (f"the boundary it shares with us is at {shared:.6g} m; from the states of "
+                f"tick {s.k - 1} the law puts it at {expected[-1]:.6g} m")
+    named = s.upper if lower else s.lower
+    edge_end = s.edge_hi if lower else s.edge_lo
+    if named == -1 and abs(shared - edge_end) <= TOL_M:
+        return None  # it sees no neighbour on our side: the law gives it the edge's end
+    c = mine[max(ks)]
+    reach = 0.5 * (c.hi - c.lo) * (1.5 if names_me else 1.0)
+    past = shared - (c.lo + reach) if lower else (c.hi - reach) - shared
+    if past > TOL_M:
+        return (f"its end {shared:.6g} m reaches {past:.3g} m further into our segment "
+                f"[{c.lo:.6g}, {c.hi:.6g}] than one tick of the law can")
+    return None

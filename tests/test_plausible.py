@@ -1,0 +1,134 @@
+"""The plausibility rules for what a neighbour may claim (agent.plausible): a chain run
+by the law itself is never refused, and each lie of issue 19 is."""
+
+from __future__ import annotations
+
+import dataclasses
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from agent.partition import chain_update
+from agent.plausible import (
+    MAX_AHEAD_TICKS,
+    MAX_BEHIND_TICKS,
+    Bounds,
+    Claim,
+    neighbour_problem,
+    state_problem,
+)
+from wire.messages import AgentState
+
+BOUNDS = Bounds(0.0, 6.0, depth_max=7.3, bin_m=0.1, max_passes=20)
+K_S, MIN_SEG = 0.1, 0.15
+
+
+def state(robot: int, k: int, lo: float, hi: float, depth: float = 0.5, n: int = 3,
+          **kw: object) -> AgentState:
+    fields: dict = dict(t=0.1 * k, k=k, robot=robot, lo=lo, hi=hi, phase=1.0, phase_des=1.0,
+                        workload=depth * (hi - lo), depth_avg=depth, direction=1,
+                        lower=robot - 1, upper=robot + 1 if robot + 1 < n else -1,
+                        edge_lo=0.0, edge_hi=6.0, turns=10.0, end_bins=[3], end_depths=[depth])
+    fields.update(kw)
+    return AgentState(**fields)
+
+
+def claim(s: AgentState) -> Claim:
+    return Claim(s.lo, s.hi, s.workload)
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(2, 8), ticks=st.integers(2, 12), seed=st.integers(0, 10**6))
+def test_a_chain_run_by_the_law_is_never_refused(n, ticks, seed):
+    import random
+
+    rng = random.Random(seed)
+    bounds = [6.0 * i / n for i in range(n + 1)]
+    depths = [rng.uniform(0.3, 3.0) for _ in range(n)]
+    history: list[list[AgentState]] = []
+    for k in range(ticks):
+        states = [state(i, k, bounds[i], bounds[i + 1], depths[i], n) for i in range(n)]
+        history.append(states)
+        bounds = chain_update(bounds, [s.workload for s in states], K_S, MIN_SEG)
+        depths = [max(0.3, d + rng.uniform(-0.05, 0.05)) for d in depths]
+    for k in range(1, ticks):
+        for i in range(n):
+            s, before = history[k][i], history[k - 1][i]
+            assert state_problem(s, BOUNDS, k) is None
+            for me, side in ((i - 1, "upper"), (i + 1, "lower")):
+                if 0 <= me < n:
+                    mine = {k - 1: claim(history[k - 1][me])}
+                    assert neighbour_problem(s, me, side, mine, before, K_S, MIN_SEG) is None
+
+
+@settings(max_examples=60, deadline=None)
+@given(shift=st.floats(1e-4, 2.0), up=st.booleans())
+def test_a_shared_boundary_off_the_law_is_refused(shift, up):
+    # robots 1 and 2 of three at tick 4; robot 1's state of tick 5 moves their boundary
+    # somewhere the law did not put it
+    r1, r2 = state(1, 4, 2.0, 4.0, 1.0), state(2, 4, 4.0, 6.0, 0.5)
+    law = chain_update([0.0, 2.0, 4.0, 6.0], [0.5 * 2, r1.workload, r2.workload], K_S, MIN_SEG)[2]
+    hi = min(5.99, max(2.01, law + (shift if up else -shift)))
+    if abs(hi - law) < 1e-5 or abs(hi - 4.0) < 1e-5:
+        return
+    forged = state(1, 5, 2.0, hi, 1.0)
+    why = neighbour_problem(forged, 2, "lower", {4: claim(r2)}, r1, K_S, MIN_SEG)
+    assert why is not None and "the law puts it at" in why
+    honest = state(1, 5, 2.0, law, 1.0)
+    assert neighbour_problem(honest, 2, "lower", {4: claim(r2)}, r1, K_S, MIN_SEG) is None
+    kept = state(1, 5, 2.0, 4.0, 1.0)  # robot 1 had not heard robot 2 in time
+    assert neighbour_problem(kept, 2, "lower", {4: claim(r2)}, r1, K_S, MIN_SEG) is None
+
+
+def test_a_claim_past_the_middle_of_our_segment_is_refused_without_history():
+    mine = {9: Claim(4.0, 6.0, 1.0)}
+    # issue 19: a state claiming [0, 5.9] m for a tick not heard before
+    forged = state(1, 10, 0.0, 5.9, 0.5)
+    assert "further into our segment" in neighbour_problem(forged, 2, "lower", mine, None,
+                                                           K_S, MIN_SEG)
+    # naming someone else, it may not pass our middle; naming us (a robot just joining,
+    # which split an older state of ours), a quarter further
+    assert neighbour_problem(state(1, 10, 2.0, 5.1, upper=7), 2, "lower", mine, None,
+                             K_S, MIN_SEG) is not None
+    assert neighbour_problem(state(1, 10, 2.0, 5.1), 2, "lower", mine, None, K_S,
+                             MIN_SEG) is None
+    # one that sees no neighbour on our side (it lost sight of us: a freeze) owns the
+    # edge to its end by the law, and may claim exactly that, not a metre short of it
+    alone = state(1, 10, 0.0, 6.0, upper=-1)
+    assert neighbour_problem(alone, 2, "lower", mine, None, K_S, MIN_SEG) is None
+    short = state(1, 10, 0.0, 5.9, upper=-1)
+    assert neighbour_problem(short, 2, "lower", mine, None, K_S, MIN_SEG) is not None
+    assert neighbour_problem(state(3, 10, 4.4, 6.0, lower=2), 2, "upper",
+                             {9: Claim(2.0, 4.0, 1.0)}, None, K_S, MIN_SEG) is None
+    assert neighbour_problem(state(3, 10, 2.4, 6.0, lower=2), 2, "upper",
+                             {9: Claim(2.0, 4.0, 1.0)}, None, K_S, MIN_SEG) is not None
+
+
+def test_the_tick_window():
+    s = state(1, 100, 2.0, 4.0)
+    assert state_problem(s, BOUNDS, 100) is None
+    assert state_problem(s, BOUNDS, None) is None  # no clock of ours yet
+    assert state_problem(s, BOUNDS, 100 - MAX_AHEAD_TICKS) is None
+    assert "ahead of ours" in state_problem(s, BOUNDS, 99 - MAX_AHEAD_TICKS)
+    assert "ahead of ours" in state_problem(dataclasses.replace(s, k=10**9), BOUNDS, 100)
+    assert state_problem(s, BOUNDS, 100 + MAX_BEHIND_TICKS) is None
+    assert "behind ours" in state_problem(s, BOUNDS, 101 + MAX_BEHIND_TICKS)
+
+
+@given(depth=st.floats(7.3001, 1.7e307))
+def test_depths_no_patrol_can_measure_are_refused(depth):
+    s = state(1, 5, 2.0, 4.0, 0.5, end_depths=[depth])
+    assert "deeper than any patrol" in state_problem(s, BOUNDS, 5)
+    deep = state(1, 5, 2.0, 4.0, depth)
+    assert "deeper than any patrol" in state_problem(deep, BOUNDS, 5)
+
+
+def test_the_other_value_rules():
+    s = state(1, 5, 2.0, 4.0, 0.5)
+    assert state_problem(s, BOUNDS, 5) is None
+    assert "not ours" in state_problem(dataclasses.replace(s, edge_hi=5.9), BOUNDS, 5)
+    assert "off the edge" in state_problem(dataclasses.replace(s, end_bins=[60]), BOUNDS, 5)
+    assert "mean depth times" in state_problem(dataclasses.replace(s, workload=5e306),
+                                               BOUNDS, 5)
+    assert "passes per sweep" in state_problem(dataclasses.replace(s, passes=21), BOUNDS, 5)
+    assert state_problem(dataclasses.replace(s, passes=20), BOUNDS, 5) is None
