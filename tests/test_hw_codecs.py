@@ -259,3 +259,32 @@ def test_scan_message_on_the_wire() -> None:
         with pytest.raises(DecodeError):
             decode(Scan, encode(bad))
 
+
+
+def test_start_link_resends_until_the_stream_flows() -> None:
+    from hwbridge.create import link as ln
+
+    link = ln.StartLink(ln.LinkTiming(retry_s=0.5, tries=3, slow_retry_s=2.0, lost_s=1.0))
+    link.restart(0.0)
+    sent = [t / 10 for t in range(0, 100) if link.step(t / 10).send_burst]
+    # three quick tries, then a slower retry every 2 s (the give-up reported once)
+    assert sent[:3] == [0.0, 0.5, 1.0] and sent[3:5] == [3.5, 5.5]
+    assert link.state == ln.RETRYING and link.bursts == len(sent)
+    link.frame(10.0)
+    assert link.state == ln.STREAMING
+    assert link.step(10.9) == ln.Step(False)  # frames may be late...
+    step = link.step(11.1)  # ...but a stream silent for lost_s has stopped
+    assert step == ln.Step(True, (ln.STREAM_LOST,)) and link.state == ln.STARTING
+    link.frame(11.2)
+    assert link.step(11.3) == ln.Step(False) and link.losses == 1
+    link.restart(20.0)  # the port was reopened: a burst at once
+    assert link.step(20.0).send_burst
+
+
+def test_start_link_reports_giving_up_once() -> None:
+    from hwbridge.create import link as ln
+
+    link = ln.StartLink(ln.LinkTiming(retry_s=0.5, tries=2))
+    link.restart(0.0)
+    reports = [r for t in range(0, 100) for r in link.step(t / 10).reports]
+    assert reports == [ln.GAVE_UP]

@@ -4,7 +4,9 @@
 modes (off, passive, safe, full; drive commands are ignored unless safe or full; a
 wheel drop in safe mode stops the wheels and falls back to passive), Drive Direct and
 Drive, the sensor stream and single reads, odometry accumulated "since last read" with
-the sub-unit remainder kept, encoder counters that wrap. ``LmsDevice`` is a SICK LMS 2xx:
+the sub-unit remainder kept, encoder counters that wrap. Its ``PowerPlan`` makes it as
+hard to reach as a real one can be: asleep, switched on late, rebooting with the cable
+in. ``LmsDevice`` is a SICK LMS 2xx:
 ACK or NAK for every telegram, mode and baud changes, the variant switch, measured values
 on request or continuously. The pty shells in ``pty.py`` drive them.
 """
@@ -20,6 +22,32 @@ from hwbridge.lms import codec as lms
 from hwbridge.lms.model import ScanGeometry
 
 MODE_NUMBERS = {"off": 0, "passive": 1, "safe": 2, "full": 3}
+
+# What the emulated robot prints when it powers up: plain text, as a Create 2 prints its
+# boot messages on the serial port at power-up (users' logs of the Roomba 600 firmware);
+# to a stream parser it is garbage. Our own words.
+BOOT_TEXT = b"\r\nemulated Create: power on\r\nfirmware: btrack emulator\r\nbattery ok\r\n"
+
+
+@dataclass(frozen=True)
+class PowerPlan:
+    """When an emulated Create cannot hear the host, as a real one sometimes cannot.
+
+    Times in seconds from the start of the run (what ``CreateDevice.advance`` is given).
+    ``asleep_s``: asleep until then, deaf and silent (a Create 2 in passive mode goes to
+    sleep after five minutes; Create 2 OI specification 2016, "Power Saving"), then awake
+    in off mode. ``boot_s``: switched on only then: deaf and silent before, its boot text
+    at power-up, then off mode. ``reboot_at_s``: reboots at these times with the cable in:
+    the stream stops, the wheels stop, boot text, off mode, so it hears nothing but Start.
+    """
+
+    asleep_s: float = 0.0
+    boot_s: float = 0.0
+    reboot_at_s: tuple[float, ...] = ()
+
+    @property
+    def awake_at_s(self) -> float:
+        return max(self.asleep_s, self.boot_s)
 
 
 @dataclass
@@ -38,17 +66,51 @@ class CreateDevice:
     charge_mah: int = 2500
     capacity_mah: int = 3000
     bad_commands: int = 0
+    plan: PowerPlan = field(default_factory=PowerPlan)
+    awake: bool = True  # False: asleep or switched off; it hears and sends nothing
+    unheard_bytes: int = 0  # host bytes that arrived while it could not hear them
+    reboots: int = 0
     _parser: oi.CommandParser = field(default_factory=oi.CommandParser)
     _dist_mm: float = 0.0
     _angle_deg: float = 0.0
     _enc: list[float] = field(default_factory=lambda: [0.0, 0.0])
+    _t: float = 0.0
 
     def __post_init__(self) -> None:
         self.baud = self.baud or self.spec.baud
+        self.awake = self.plan.awake_at_s <= 0.0
+
+    # power -----------------------------------------------------------------------
+    def advance(self, t: float) -> bytes:
+        """Apply the power plan up to run time ``t``; return what the robot prints."""
+        out = bytearray()
+        if not self.awake and t >= self.plan.awake_at_s:
+            self.awake = True
+            self.mode = "off"
+            if self.plan.boot_s > 0.0:
+                out += BOOT_TEXT
+        for at in self.plan.reboot_at_s:
+            if self._t < at <= t:
+                out += self.reboot()
+        self._t = max(self._t, t)
+        return bytes(out)
+
+    def reboot(self) -> bytes:
+        """Power cycled with the cable in: back in off mode with no stream; its boot text."""
+        self.reboots += 1
+        self.mode = "off"
+        self.streaming = False
+        self.stream_ids = ()
+        self._stop()
+        self._parser = oi.CommandParser()
+        return BOOT_TEXT
 
     # commands from the host --------------------------------------------------
     def receive(self, data: bytes) -> bytes:
         """Apply the host's bytes; return what the robot answers at once."""
+        if not self.awake:
+            self.unheard_bytes += len(data)
+            return b""
         out = bytearray()
         for op, args in self._parser.feed(data):
             if op == oi.START:
@@ -152,7 +214,7 @@ class CreateDevice:
 
     def stream_frame(self) -> bytes | None:
         """The next stream frame, or None when not streaming."""
-        if not self.streaming:
+        if not self.streaming or not self.awake:
             return None
         return oi.encode_stream_frame(self.stream_ids, self.take_values(self.stream_ids))
 

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from hwbridge.create.model import ModelSpec
-from hwbridge.emulators.devices import CreateDevice, LmsDevice
+from hwbridge.emulators.devices import CreateDevice, LmsDevice, PowerPlan
 
 CREATE_FRAME_S = 0.015
 LMS_SCAN_S = 2.0 / 75.0  # interlaced 0.5 degree scan: two mirror turns
@@ -158,15 +158,17 @@ class _Emulator:
 
 
 class CreateEmulator(_Emulator):
-    """An iRobot Create (or Create 2) on a pty."""
+    """An iRobot Create (or Create 2) on a pty. ``plan`` makes it asleep, switched on late
+    or rebooting (``devices.PowerPlan``; times from ``start``)."""
 
-    def __init__(self, link: str | Path, spec: ModelSpec, faults: Faults | None = None) -> None:
+    def __init__(self, link: str | Path, spec: ModelSpec, faults: Faults | None = None, *,
+                 plan: PowerPlan | None = None) -> None:
         super().__init__(link, faults)
-        self.device = CreateDevice(spec)
+        self.device = CreateDevice(spec, plan=plan or PowerPlan())
         self.frames = 0
 
     def _run(self) -> None:
-        next_frame = time.monotonic()
+        started = next_frame = time.monotonic()
         while not self._stop.is_set():
             data = self.port.read(max(0.0, next_frame - time.monotonic()))
             if data:
@@ -181,7 +183,10 @@ class CreateEmulator(_Emulator):
                 if now > next_frame:  # fell behind (a loaded machine): do not burst
                     next_frame = now + CREATE_FRAME_S
                 with self.lock:
+                    printed = self.device.advance(now - started)
                     frame = self.device.stream_frame()
+                if printed:
+                    self._send(printed, damage=False)
                 if frame is not None and self.port.plugged:
                     self._send(frame)
                     self.frames += 1

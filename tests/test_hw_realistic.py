@@ -1,0 +1,71 @@
+"""Drivers against emulators set to behave as the real devices do where the plain
+emulators were kinder: a Create that is asleep, switched on late or rebooted, that
+babbles, that truncates its odometry; an LMS that answers slowly, speaks its own units
+and ranges, reports faults and partial scans. Byte level, on real pseudo-terminals;
+each test here failed on the drivers before the fix it names."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from hwbridge.create import model as cm
+from hwbridge.create_driver import CreateDriver
+from hwbridge.emulators.devices import PowerPlan
+from hwbridge.emulators.pty import CreateEmulator
+from hwbridge.lms_driver import LmsDriver
+
+
+def pump(driver: CreateDriver | LmsDriver, cond: Callable[[], bool], timeout: float,
+         what: str) -> list:
+    """Poll the driver until ``cond()``; returns what LmsDriver.poll produced."""
+    got: list = []
+    deadline = time.monotonic() + timeout
+    while not cond():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+        out = driver.poll(time.monotonic())
+        if out:
+            got += out
+    return got
+
+
+# --- Create: the start burst is resent until the stream flows -----------------------
+
+
+@pytest.mark.parametrize("plan", [PowerPlan(asleep_s=1.0), PowerPlan(boot_s=1.0)],
+                         ids=["asleep", "switched-on-late"])
+def test_create_streams_once_the_robot_can_hear(tmp_path: Path, plan: PowerPlan) -> None:
+    spec = cm.MODELS["create"]
+    emu = CreateEmulator(tmp_path / "create", spec, plan=plan).start()
+    drv = CreateDriver(emu.path, spec)
+    try:
+        drv.open()
+        pump(drv, lambda: drv.parser.stats.frames >= 3, 6, "the stream once the robot hears")
+        assert emu.device.unheard_bytes > 0  # the first burst went unheard
+        assert emu.device.mode == "safe"
+        assert drv.tick(time.monotonic()) is not None
+    finally:
+        drv.close()
+        emu.stop()
+
+
+def test_create_restarted_after_a_reboot_mid_run(tmp_path: Path) -> None:
+    spec = cm.MODELS["create"]
+    emu = CreateEmulator(tmp_path / "create", spec, plan=PowerPlan(reboot_at_s=(1.0,))).start()
+    dev = emu.device
+    drv = CreateDriver(emu.path, spec)
+    try:
+        drv.open()
+        pump(drv, lambda: drv.parser.stats.frames >= 3, 5, "the stream before the reboot")
+        pump(drv, lambda: dev.reboots == 1, 5, "the reboot")
+        frames = drv.parser.stats.frames
+        pump(drv, lambda: drv.parser.stats.frames >= frames + 3, 6,
+             "the stream after the reboot")
+        assert dev.mode == "safe"
+    finally:
+        drv.close()
+        emu.stop()
