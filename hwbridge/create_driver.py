@@ -88,6 +88,12 @@ class CreateDriver:
                             "switched off?); starting it again", self.transport.port)
                 self.odometry.reset()  # a rebooted Create 2 counts its encoders from 0
                 self.wheels = (0, 0)
+            elif report == ln.NO_STREAM:
+                log.warning("%s: no valid sensor frame for %.1f s (%d bytes arrived meanwhile, "
+                            "none of them a frame); sending Start again (%d bursts so far). Is "
+                            "the robot switched on and awake, and at %d baud?",
+                            self.transport.port, now - self.link.quiet_since,
+                            self._bytes_since_frame, self.link.bursts, self.transport.baud)
             elif report == ln.GAVE_UP:
                 t = self.link.timing
                 log.error("%s: no sensor stream after %d start bursts over %.1f s (%d bytes "

@@ -70,6 +70,37 @@ def test_create_bridge_process(tmp_path: Path) -> None:
     assert "Traceback" not in (tmp_path / "bridge.log").read_text()
 
 
+def test_create_bridge_warns_of_a_babbling_robot_and_recovers(tmp_path: Path) -> None:
+    """A Create that sends only garbage from the start (issue 19, item 5): the bridge says
+    so, rate-limited and counted, keeps trying, and publishes once the robot answers."""
+    ns, port = unique_ns(), free_port()
+    keys = Keys(ns)
+    emu = CreateEmulator(tmp_path / "create0", cm.MODELS["create"])
+    emu.device.babble = True
+    emu.start()
+    log = tmp_path / "bridge.log"
+    senses: list[Sense] = []
+    with hub_session(ns, port) as session:
+        session.declare_subscriber(keys.sense(0),
+                                   lambda s: senses.append(decode(Sense, s.payload.to_bytes())))
+        proc = start(["bridge", "create", "--port", emu.path, "--id", "0",
+                      *member_args(ns, port)], log=log)
+        try:
+            wait_for(lambda: "no valid sensor frame" in log.read_text(), 20, "the warning")
+            assert not senses and proc.poll() is None
+            with emu.lock:
+                emu.device.babble = False  # the robot starts answering
+            wait_for(lambda: len(senses) >= 3, 20, "Sense once the robot answers")
+        finally:
+            end(proc)
+            emu.stop()
+    summary = _summary(proc)
+    assert proc.returncode == 0
+    assert summary["no_stream_warnings"] >= 1 and summary["sense"] >= 3
+    assert summary["start_bursts"] >= 2 and summary["skipped_bytes"] > 0
+    assert "Traceback" not in log.read_text()
+
+
 def test_lms_bridge_process(tmp_path: Path) -> None:
     ns, port = unique_ns(), free_port()
     keys = Keys(ns)

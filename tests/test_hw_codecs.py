@@ -287,4 +287,18 @@ def test_start_link_reports_giving_up_once() -> None:
     link = ln.StartLink(ln.LinkTiming(retry_s=0.5, tries=2))
     link.restart(0.0)
     reports = [r for t in range(0, 100) for r in link.step(t / 10).reports]
-    assert reports == [ln.GAVE_UP]
+    assert reports.count(ln.GAVE_UP) == 1
+
+
+def test_start_link_warns_while_no_frame_comes_rate_limited() -> None:
+    from hwbridge.create import link as ln
+
+    link = ln.StartLink(ln.LinkTiming(warn_after_s=2.0, warn_every_s=10.0))
+    link.restart(0.0)
+    warned = [t / 10 for t in range(0, 300) if ln.NO_STREAM in link.step(t / 10).reports]
+    assert warned == [2.0, 12.0, 22.0] and link.warnings == 3
+    link.frame(30.0)
+    assert not [t for t in range(31, 60) if link.step(t / 2).reports]  # streaming: quiet
+    link.frame(60.0)
+    warned = [t / 10 for t in range(600, 700) if ln.NO_STREAM in link.step(t / 10).reports]
+    assert warned == [62.0]  # lost at 61.0 s; the warning counts from the last frame

@@ -7,7 +7,9 @@ off mode, not streaming) does not hear a burst sent once, so the burst is resent
 frames flow: every ``retry_s`` for ``tries`` bursts (libcreate does the same, 10 tries
 500 ms apart: src/serial.cpp, Serial::startReading), then every ``slow_retry_s`` for as
 long as it takes. A stream that stops for ``lost_s`` (a reboot, the robot asleep) starts
-it all again.
+it all again. While no frame comes, a warning is due ``warn_after_s`` after the last frame
+(or the start) and then every ``warn_every_s``, so a robot that is silent or sends only
+garbage is never a silent bridge (issue 19, item 5).
 
 States and transitions (``TRANSITIONS``):
 
@@ -37,6 +39,7 @@ TRANSITIONS: dict[tuple[str, str], str] = {
 # What ``step`` reports for the caller to log.
 GAVE_UP = "gave_up"  # the quick tries are spent; slower retries from now on
 STREAM_LOST = "stream_lost"  # a stream that flowed has stopped
+NO_STREAM = "no_stream"  # still no frame (rate-limited)
 
 
 @dataclass(frozen=True)
@@ -45,6 +48,8 @@ class LinkTiming:
     tries: int = 10
     slow_retry_s: float = 2.0
     lost_s: float = 1.0  # 66 frame periods of 15 ms: not a late frame but a stopped stream
+    warn_after_s: float = 2.0
+    warn_every_s: float = 10.0
 
 
 @dataclass(frozen=True)
@@ -59,9 +64,11 @@ class StartLink:
         self.state = STARTING
         self.bursts = 0  # start bursts sent, all told
         self.losses = 0  # STREAM_LOST reports
+        self.warnings = 0  # NO_STREAM reports
         self.quiet_since = 0.0  # the last frame, or when the present start began
         self._tries = 0
         self._next_burst = 0.0
+        self._next_warn = 0.0
         self._last_frame = 0.0
 
     # transitions -----------------------------------------------------------------
@@ -72,6 +79,7 @@ class StartLink:
             self._next_burst = now
             if event == "restart":
                 self.quiet_since = now
+            self._next_warn = self.quiet_since + self.timing.warn_after_s
         elif self.state == RETRYING:
             self._next_burst = now + self.timing.slow_retry_s
 
@@ -114,6 +122,10 @@ class StartLink:
         elif self.state == RETRYING and now >= self._next_burst:
             send = True
             self._next_burst = now + self.timing.slow_retry_s
+        if self.state != STREAMING and now >= self._next_warn:
+            self.warnings += 1
+            self._next_warn = now + self.timing.warn_every_s
+            reports.append(NO_STREAM)
         if send:
             self.bursts += 1
         return Step(send, tuple(reports))

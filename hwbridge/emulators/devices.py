@@ -6,7 +6,8 @@ wheel drop in safe mode stops the wheels and falls back to passive), Drive Direc
 Drive, the sensor stream and single reads, odometry accumulated "since last read" with
 the sub-unit remainder kept, encoder counters that wrap. Its ``PowerPlan`` makes it as
 hard to reach as a real one can be: asleep, switched on late, rebooting with the cable
-in. ``LmsDevice`` is a SICK LMS 2xx:
+in; ``babble`` makes it send noise and hear nothing (a robot at another baud rate, or a
+noisy line). ``LmsDevice`` is a SICK LMS 2xx:
 ACK or NAK for every telegram, mode and baud changes, the variant switch, measured values
 on request or continuously. The pty shells in ``pty.py`` drive them.
 """
@@ -14,6 +15,7 @@ on request or continuously. The pty shells in ``pty.py`` drive them.
 from __future__ import annotations
 
 import math
+import random
 from dataclasses import dataclass, field
 
 from hwbridge.create import codec as oi
@@ -68,6 +70,7 @@ class CreateDevice:
     bad_commands: int = 0
     plan: PowerPlan = field(default_factory=PowerPlan)
     awake: bool = True  # False: asleep or switched off; it hears and sends nothing
+    babble: bool = False  # noise instead of frames, and the host's bytes go unheard
     unheard_bytes: int = 0  # host bytes that arrived while it could not hear them
     reboots: int = 0
     _parser: oi.CommandParser = field(default_factory=oi.CommandParser)
@@ -75,6 +78,7 @@ class CreateDevice:
     _angle_deg: float = 0.0
     _enc: list[float] = field(default_factory=lambda: [0.0, 0.0])
     _t: float = 0.0
+    _noise: random.Random = field(default_factory=lambda: random.Random(19))
 
     def __post_init__(self) -> None:
         self.baud = self.baud or self.spec.baud
@@ -82,7 +86,8 @@ class CreateDevice:
 
     # power -----------------------------------------------------------------------
     def advance(self, t: float) -> bytes:
-        """Apply the power plan up to run time ``t``; return what the robot prints."""
+        """Apply the power plan up to run time ``t``; return what the robot sends of its own
+        accord (boot text, noise while it babbles). Called once per stream period."""
         out = bytearray()
         if not self.awake and t >= self.plan.awake_at_s:
             self.awake = True
@@ -93,6 +98,8 @@ class CreateDevice:
             if self._t < at <= t:
                 out += self.reboot()
         self._t = max(self._t, t)
+        if self.babble and self.awake:
+            out += bytes(self._noise.randrange(256) for _ in range(12))
         return bytes(out)
 
     def reboot(self) -> bytes:
@@ -108,7 +115,7 @@ class CreateDevice:
     # commands from the host --------------------------------------------------
     def receive(self, data: bytes) -> bytes:
         """Apply the host's bytes; return what the robot answers at once."""
-        if not self.awake:
+        if not self.awake or self.babble:
             self.unheard_bytes += len(data)
             return b""
         out = bytearray()
@@ -214,7 +221,7 @@ class CreateDevice:
 
     def stream_frame(self) -> bytes | None:
         """The next stream frame, or None when not streaming."""
-        if not self.streaming or not self.awake:
+        if not self.streaming or not self.awake or self.babble:
             return None
         return oi.encode_stream_frame(self.stream_ids, self.take_values(self.stream_ids))
 
