@@ -171,6 +171,11 @@ class CreateDriver:
         return TickSensing(ice, algae, dist, dtheta, r, frames)
 
     def close(self) -> None:
+        """Stop the wheels and the stream, and leave the robot as it was found: Start puts it
+        back in passive mode (out of Safe or Full, so its buttons work and it charges and
+        sleeps), then Stop ends the OI on a Create 2 (off mode), as libcreate's
+        Serial::disconnect does (src/serial.cpp). The original Create's OI has no Stop."""
         if self.transport.is_open:
-            self.transport.write(oi.drive_direct(0, 0) + oi.pause_resume(False))
+            self.transport.write(oi.drive_direct(0, 0) + oi.pause_resume(False) + oi.start()
+                                 + (oi.stop() if self.spec.oi_stop else b""))
         self.transport.close()

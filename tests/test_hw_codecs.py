@@ -21,6 +21,7 @@ def test_commands_bytes() -> None:
     assert oi.start() == b"\x80"
     assert oi.safe() == b"\x83"
     assert oi.full() == b"\x84"
+    assert oi.stop() == b"\xad"  # 173, the Create 2's
     assert oi.baud(57600) == bytes([129, 10])
     assert oi.baud(115200) == bytes([129, 11])
     # drive direct: right 200 mm/s, left -200 mm/s, big-endian signed

@@ -17,6 +17,7 @@ from hwbridge.create_driver import CreateDriver
 from hwbridge.emulators.devices import PowerPlan
 from hwbridge.emulators.pty import CreateEmulator
 from hwbridge.lms_driver import LmsDriver
+from tests.procutil import wait_for
 
 
 def pump(driver: CreateDriver | LmsDriver, cond: Callable[[], bool], timeout: float,
@@ -66,6 +67,32 @@ def test_create_restarted_after_a_reboot_mid_run(tmp_path: Path) -> None:
         pump(drv, lambda: drv.parser.stats.frames >= frames + 3, 6,
              "the stream after the reboot")
         assert dev.mode == "safe"
+    finally:
+        drv.close()
+        emu.stop()
+
+
+# --- Create: a clean shutdown leaves the robot out of Safe mode -----------------------
+
+
+@pytest.mark.parametrize("model,tail,mode", [
+    ("create2", bytes([145, 0, 0, 0, 0, 150, 0, 128, 173]), "off"),
+    ("create", bytes([145, 0, 0, 0, 0, 150, 0, 128]), "passive"),
+], ids=["create2", "create"])
+def test_create_close_sends_the_robot_out_of_safe_mode(tmp_path: Path, model: str,
+                                                        tail: bytes, mode: str) -> None:
+    spec = cm.MODELS[model]
+    emu = CreateEmulator(tmp_path / "create", spec).start()
+    dev = emu.device
+    drv = CreateDriver(emu.path, spec)
+    try:
+        drv.open()
+        pump(drv, lambda: drv.parser.stats.frames >= 2, 5, "the stream")
+        assert dev.mode == "safe"
+        drv.close()
+        wait_for(lambda: bytes(emu.received).endswith(tail), 5, "the closing bytes")
+        with emu.lock:
+            assert dev.mode == mode and not dev.streaming and dev.bad_commands == 0
     finally:
         drv.close()
         emu.stop()

@@ -17,8 +17,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-# opcodes
-START, BAUD, CONTROL, SAFE, FULL = 128, 129, 130, 131, 132
+# opcodes (Stop, 173, only in the Create 2's OI: it ends the OI, the robot back in off
+# mode with no stream; Create 2 OI specification 2016)
+START, BAUD, CONTROL, SAFE, FULL, STOP = 128, 129, 130, 131, 132, 173
 DRIVE, DRIVE_DIRECT = 137, 145
 SENSORS, STREAM, QUERY_LIST, PAUSE_RESUME = 142, 148, 149, 150
 STREAM_HEADER = 19
@@ -50,7 +51,7 @@ BAUD_CODES = {300: 0, 600: 1, 1200: 2, 2400: 3, 4800: 4, 9600: 5, 14400: 6, 1920
 
 # Data bytes after each opcode; None means "a count byte, then that many bytes".
 COMMAND_ARGS: dict[int, int | None] = {
-    START: 0, BAUD: 1, CONTROL: 0, SAFE: 0, FULL: 0, DRIVE: 4, DRIVE_DIRECT: 4,
+    START: 0, BAUD: 1, CONTROL: 0, SAFE: 0, FULL: 0, STOP: 0, DRIVE: 4, DRIVE_DIRECT: 4,
     SENSORS: 1, STREAM: None, QUERY_LIST: None, PAUSE_RESUME: 1,
 }
 
@@ -81,6 +82,10 @@ def safe() -> bytes:
 
 def full() -> bytes:
     return bytes([FULL])
+
+
+def stop() -> bytes:
+    return bytes([STOP])
 
 
 def baud(rate: int) -> bytes:

@@ -35,13 +35,14 @@ class ModelSpec:
     stream_ids: tuple[int, ...]
     odometry: str  # "packets" (19/20) or "encoders" (43/44)
     cargo_bay: bool  # has the cargo bay analog and digital inputs
+    oi_stop: bool = False  # its OI has Stop (173): the Create 2's; the original Create's not
 
 
 MODELS = {
     "create": ModelSpec("create", 57600, CREATE_WHEEL_BASE_M, codec.CREATE_STREAM, "packets",
                         True),
     "create2": ModelSpec("create2", 115200, CREATE2_WHEEL_BASE_M, codec.CREATE2_STREAM,
-                         "encoders", False),
+                         "encoders", False, oi_stop=True),
 }
 
 

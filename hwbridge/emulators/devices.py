@@ -126,6 +126,13 @@ class CreateDevice:
                 self._stop()
             elif self.mode == "off":
                 self.bad_commands += 1  # the OI ignores everything before Start
+            elif op == oi.STOP:
+                if not self.spec.oi_stop:
+                    self.bad_commands += 1  # not an opcode of this model's OI
+                    continue
+                self.mode = "off"
+                self.streaming = False
+                self._stop()
             elif op == oi.SAFE:
                 self.mode = "safe"
             elif op == oi.FULL:

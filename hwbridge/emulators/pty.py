@@ -166,6 +166,7 @@ class CreateEmulator(_Emulator):
         super().__init__(link, faults)
         self.device = CreateDevice(spec, plan=plan or PowerPlan())
         self.frames = 0
+        self.received = bytearray()  # every byte the host sent, for tests to read
 
     def _run(self) -> None:
         started = next_frame = time.monotonic()
@@ -174,6 +175,7 @@ class CreateEmulator(_Emulator):
             if data:
                 self.bytes_in += len(data)
                 with self.lock:
+                    self.received += data
                     answer = self.device.receive(data)
                 if answer:
                     self._send(answer, damage=False)
