@@ -46,7 +46,7 @@ def test_stream_frame_worked_by_hand() -> None:
 
 
 FULL_VALUES = {7: 0x03, 19: -120, 20: 45, 21: 2, 22: 16200, 25: 2500, 26: 3000, 32: 0x01,
-               33: 1023, 35: 2, 43: 65535, 44: 1}
+               33: 1023, 35: 2, 39: -200, 40: 32767, 41: 150, 42: -150, 43: 65535, 44: 1}
 
 
 def test_every_packet_round_trips() -> None:
@@ -303,3 +303,27 @@ def test_start_link_warns_while_no_frame_comes_rate_limited() -> None:
     link.frame(60.0)
     warned = [t / 10 for t in range(600, 700) if ln.NO_STREAM in link.step(t / 10).reports]
     assert warned == [62.0]  # lost at 61.0 s; the warning counts from the last frame
+
+
+def test_packet_odometry_bounds_the_requested_motion_by_the_packets() -> None:
+    po = cm.PacketOdometry(wheel_base_m=0.25, period_s=0.015)
+    safe = {7: 0, 35: 2}
+    # a slow spin, +-50 mm/s: 0 mm and 0.34 degrees a frame, read as 0 and 0
+    turn = {**safe, 19: 0, 20: 0, 41: 50, 42: -50}
+    d, th = po.step(turn)
+    assert d == 0.0 and th == pytest.approx(100 * 0.015 / 250)  # rad: (vr - vl) t / base
+    # stalled against a wall: asked to spin fast, the packets read nothing; believed no
+    # further than a degree a frame
+    po.reset()
+    d, th = po.step({**safe, 19: 0, 20: 0, 41: 500, 42: -500})
+    assert th == pytest.approx(math.radians(1.0))
+    # the request and the packets agree within a unit: the request's finer figure stands
+    po.reset()
+    d, th = po.step({**safe, 19: 7, 20: 0, 41: 500, 42: 500})
+    assert d == pytest.approx(0.0075)
+    # wheels not driven (passive mode, or a wheel dropped): the packets as they are
+    po.reset()
+    assert po.step({7: 0, 35: 1, 19: 123, 20: 10, 41: 500, 42: -500}) == pytest.approx(
+        (0.123, math.radians(10)))
+    po.reset()
+    assert po.step({**safe, 7: 0x08, 19: 5, 20: 0, 41: 500, 42: 500})[0] == 0.005

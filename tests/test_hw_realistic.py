@@ -96,3 +96,37 @@ def test_create_close_sends_the_robot_out_of_safe_mode(tmp_path: Path, model: st
     finally:
         drv.close()
         emu.stop()
+
+
+# --- Create: odometry from packets the firmware truncates at every read ---------------
+
+
+def test_create_odometry_of_a_slow_turn_survives_truncated_packets(tmp_path: Path) -> None:
+    spec = cm.MODELS["create"]
+    emu = CreateEmulator(tmp_path / "create", spec, drop_remainder=True, moves=True).start()
+    dev = emu.device
+    drv = CreateDriver(emu.path, spec, watchdog_s=30.0)
+    try:
+        drv.open()
+        pump(drv, lambda: drv.parser.stats.frames >= 2, 5, "the stream")
+        drv.tick(time.monotonic())
+        with emu.lock:
+            dist0, turned0 = dev.travelled_m, dev.turned_rad
+        # 5 cm/s and 0.5 rad/s (29 deg/s): 0.75 mm and 0.43 degrees a frame, each read as 0
+        drv.command(0.05, 0.5, time.monotonic())
+        frames = drv.parser.stats.frames
+        pump(drv, lambda: drv.parser.stats.frames >= frames + 40, 5, "40 frames of turning")
+        drv.command(0.0, 0.0, time.monotonic())
+        pump(drv, lambda: dev.wheel_speeds() == (0.0, 0.0), 5, "the wheels stopped")
+        frames = drv.parser.stats.frames
+        pump(drv, lambda: drv.parser.stats.frames >= frames + 3, 5, "frames at rest")
+        s = drv.tick(time.monotonic())
+        assert s is not None
+        with emu.lock:
+            dist, turned = dev.travelled_m - dist0, dev.turned_rad - turned0
+        assert turned > 0.25 and dist > 0.025  # the robot did turn and move...
+        assert s.odom_dtheta == pytest.approx(turned, abs=0.01)  # ...and odometry says so
+        assert s.odom_dist_m == pytest.approx(dist, abs=0.002)
+    finally:
+        drv.close()
+        emu.stop()

@@ -10,7 +10,10 @@ specification (2016): a stream frame is header 19, a byte count n, n bytes of
 modulo 256; 16-bit values are big-endian; distance (19, mm) and angle (20, degrees,
 counter-clockwise positive) are signed; packet 32 holds the cargo-bay digital inputs
 (bit 0 = input 0, pin 17), packet 33 the cargo-bay analog input (pin 4, 10 bits,
-0..1023 for 0..5 V), packet 35 the OI mode (0 off, 1 passive, 2 safe, 3 full).
+0..1023 for 0..5 V), packet 35 the OI mode (0 off, 1 passive, 2 safe, 3 full), packets
+39 to 42 the velocity and radius last requested with Drive and the right and left wheel
+velocities last requested with Drive Direct (signed, mm/s and mm; Create OI
+specification 2006, p. 21).
 """
 
 from __future__ import annotations
@@ -37,12 +40,16 @@ PACKETS: dict[int, tuple[int, bool]] = {
     32: (1, False),  # cargo bay digital inputs (Create)
     33: (2, False),  # cargo bay analog signal, 10 bits (Create)
     35: (1, False),  # OI mode
+    39: (2, True),  # requested velocity, mm/s, of the last Drive
+    40: (2, True),  # requested radius, mm, of the last Drive
+    41: (2, True),  # requested right wheel velocity, mm/s, of the last Drive Direct
+    42: (2, True),  # requested left wheel velocity, mm/s, of the last Drive Direct
     43: (2, False),  # left encoder counts (Create 2), a wrapping 16-bit counter
     44: (2, False),  # right encoder counts (Create 2)
 }
 
 # What each model's bridge streams.
-CREATE_STREAM = (7, 19, 20, 21, 22, 25, 26, 32, 33, 35)
+CREATE_STREAM = (7, 19, 20, 21, 22, 25, 26, 32, 33, 35, 41, 42)
 CREATE2_STREAM = (7, 21, 22, 25, 26, 35, 43, 44)
 
 # Baud codes of opcode 129 (OI specification table).

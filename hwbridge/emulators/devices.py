@@ -4,7 +4,8 @@
 modes (off, passive, safe, full; drive commands are ignored unless safe or full; a
 wheel drop in safe mode stops the wheels and falls back to passive), Drive Direct and
 Drive, the sensor stream and single reads, odometry accumulated "since last read" with
-the sub-unit remainder kept, encoder counters that wrap. Its ``PowerPlan`` makes it as
+the sub-unit remainder kept (or, with ``drop_remainder``, dropped at every read as the
+original Create's firmware does), encoder counters that wrap. Its ``PowerPlan`` makes it as
 hard to reach as a real one can be: asleep, switched on late, rebooting with the cable
 in; ``babble`` makes it send noise and hear nothing (a robot at another baud rate, or a
 noisy line). ``LmsDevice`` is a SICK LMS 2xx:
@@ -71,12 +72,20 @@ class CreateDevice:
     plan: PowerPlan = field(default_factory=PowerPlan)
     awake: bool = True  # False: asleep or switched off; it hears and sends nothing
     babble: bool = False  # noise instead of frames, and the host's bytes go unheard
+    # Distance (19) and angle (20) keep only whole mm and degrees at each read and drop the
+    # rest, as the original Create's firmware does: at one read per 15 ms stream period a
+    # turn slower than 1 deg / 15 ms (about 67 deg/s) reads as none (AutonomyLab
+    # create_robot issue 28; libcreate issue 22).
+    drop_remainder: bool = False
+    travelled_m: float = 0.0  # all the motion ever added, for tests to compare with
+    turned_rad: float = 0.0
     unheard_bytes: int = 0  # host bytes that arrived while it could not hear them
     reboots: int = 0
     _parser: oi.CommandParser = field(default_factory=oi.CommandParser)
     _dist_mm: float = 0.0
     _angle_deg: float = 0.0
     _enc: list[float] = field(default_factory=lambda: [0.0, 0.0])
+    _drive: tuple[int, int] = (0, 0)  # velocity and radius of the last Drive
     _t: float = 0.0
     _noise: random.Random = field(default_factory=lambda: random.Random(19))
 
@@ -147,7 +156,7 @@ class CreateDevice:
                     self.right_mm_s, self.left_mm_s = oi.parse_drive_direct(args)
             elif op == oi.DRIVE:
                 if self.mode in ("safe", "full"):
-                    self._drive(args)
+                    self._drive_radius(args)
             elif op in (oi.STREAM, oi.QUERY_LIST, oi.SENSORS):
                 ids = (args[0],) if op == oi.SENSORS else oi.parse_id_list(args)
                 if any(pid not in oi.PACKETS for pid in ids):
@@ -168,9 +177,10 @@ class CreateDevice:
     def _stop(self) -> None:
         self.right_mm_s = self.left_mm_s = 0
 
-    def _drive(self, args: bytes) -> None:
+    def _drive_radius(self, args: bytes) -> None:
         v = int.from_bytes(args[0:2], "big", signed=True)
         radius = int.from_bytes(args[2:4], "big", signed=True)
+        self._drive = (v, radius)
         half_base = 500.0 * self.spec.wheel_base_m
         if radius in (-32768, 32767):
             r = left = v
@@ -193,10 +203,17 @@ class CreateDevice:
     def add_motion(self, dist_m: float, dtheta: float) -> None:
         """What the wheel encoders measured over a physics step."""
         half = 0.5 * dtheta * self.spec.wheel_base_m
+        self.travelled_m += dist_m
+        self.turned_rad += dtheta
         self._dist_mm += dist_m * 1000.0
         self._angle_deg += math.degrees(dtheta)
         self._enc[0] += (dist_m - half) * 1000.0 / MM_PER_COUNT
         self._enc[1] += (dist_m + half) * 1000.0 / MM_PER_COUNT
+
+    def roll(self, dt: float) -> None:
+        """The robot on a floor: its wheels move it for ``dt`` seconds, exactly."""
+        right, left = self.wheel_speeds()
+        self.add_motion(0.5 * (right + left) * dt, (right - left) / self.spec.wheel_base_m * dt)
 
     def set_wheel_drop(self, dropped: bool) -> None:
         self.bumps = (self.bumps | 0x0C) if dropped else (self.bumps & ~0x1C)
@@ -210,11 +227,11 @@ class CreateDevice:
         for pid in ids:
             if pid == 19:
                 report = int(self._dist_mm)  # toward zero; the rest stays for next time
-                self._dist_mm -= report
+                self._dist_mm = 0.0 if self.drop_remainder else self._dist_mm - report
                 values[pid] = max(-32768, min(32767, report))
             elif pid == 20:
                 report = int(self._angle_deg)
-                self._angle_deg -= report
+                self._angle_deg = 0.0 if self.drop_remainder else self._angle_deg - report
                 values[pid] = max(-32768, min(32767, report))
             elif pid in (43, 44):
                 values[pid] = int(math.floor(self._enc[pid - 43])) & 0xFFFF
@@ -222,7 +239,8 @@ class CreateDevice:
                 values[pid] = {
                     7: self.bumps & 0x1F, 21: 0, 22: self.voltage_mv, 25: self.charge_mah,
                     26: self.capacity_mah, 32: self.digital & 0x1F, 33: self.analog & 0x3FF,
-                    35: MODE_NUMBERS[self.mode],
+                    35: MODE_NUMBERS[self.mode], 39: self._drive[0], 40: self._drive[1],
+                    41: self.right_mm_s, 42: self.left_mm_s,
                 }[pid]
         return values
 

@@ -159,12 +159,17 @@ class _Emulator:
 
 class CreateEmulator(_Emulator):
     """An iRobot Create (or Create 2) on a pty. ``plan`` makes it asleep, switched on late
-    or rebooting (``devices.PowerPlan``; times from ``start``)."""
+    or rebooting (``devices.PowerPlan``; times from ``start``); ``drop_remainder`` makes its
+    odometry packets truncate as the original Create's do; ``moves`` makes it drive itself
+    at its wheel speeds each stream period (for tests without the simulator's physics)."""
 
     def __init__(self, link: str | Path, spec: ModelSpec, faults: Faults | None = None, *,
-                 plan: PowerPlan | None = None) -> None:
+                 plan: PowerPlan | None = None, drop_remainder: bool = False,
+                 moves: bool = False) -> None:
         super().__init__(link, faults)
-        self.device = CreateDevice(spec, plan=plan or PowerPlan())
+        self.device = CreateDevice(spec, plan=plan or PowerPlan(),
+                                   drop_remainder=drop_remainder)
+        self.moves = moves
         self.frames = 0
         self.received = bytearray()  # every byte the host sent, for tests to read
 
@@ -186,6 +191,8 @@ class CreateEmulator(_Emulator):
                     next_frame = now + CREATE_FRAME_S
                 with self.lock:
                     printed = self.device.advance(now - started)
+                    if self.moves:
+                        self.device.roll(CREATE_FRAME_S)
                     frame = self.device.stream_frame()
                 if printed:
                     self._send(printed, damage=False)
