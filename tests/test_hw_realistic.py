@@ -15,7 +15,8 @@ import pytest
 from hwbridge.create import model as cm
 from hwbridge.create_driver import CreateDriver
 from hwbridge.emulators.devices import PowerPlan
-from hwbridge.emulators.pty import CreateEmulator
+from hwbridge.emulators.pty import CreateEmulator, LmsEmulator
+from hwbridge.lms import codec as lms
 from hwbridge.lms_driver import LmsDriver
 from tests.procutil import wait_for
 
@@ -127,6 +128,28 @@ def test_create_odometry_of_a_slow_turn_survives_truncated_packets(tmp_path: Pat
         assert turned > 0.25 and dist > 0.025  # the robot did turn and move...
         assert s.odom_dtheta == pytest.approx(turned, abs=0.01)  # ...and odometry says so
         assert s.odom_dist_m == pytest.approx(dist, abs=0.002)
+    finally:
+        drv.close()
+        emu.stop()
+
+
+# --- LMS: replies as slow as a real sensor's ------------------------------------------
+
+RANGES = [2.0 + 0.001 * j for j in range(361)]
+
+
+def test_lms_start_up_waits_for_a_slow_reply(tmp_path: Path) -> None:
+    """The sensor takes 1.6 s to stop its output, at 9600 baud after power-up, and the
+    line carries only garbage between ends at different rates."""
+    stop = lms.mode_change(lms.STOP_CONTINUOUS)[4:6]  # the telegram's payload
+    emu = LmsEmulator(tmp_path / "lms", lambda: RANGES, reply_latency_s={stop: 1.6},
+                      check_baud=True).start()
+    drv = LmsDriver(emu.path, baud=38400)
+    try:
+        drv.open()
+        assert emu.device.baud == drv.transport.baud == 38400
+        scans = pump(drv, lambda: drv.scans >= 2, 10, "two scans")
+        assert scans[0][0] == pytest.approx(2.0) and drv.serial_errors == 0
     finally:
         drv.close()
         emu.stop()

@@ -10,7 +10,8 @@ hard to reach as a real one can be: asleep, switched on late, rebooting with the
 in; ``babble`` makes it send noise and hear nothing (a robot at another baud rate, or a
 noisy line). ``LmsDevice`` is a SICK LMS 2xx:
 ACK or NAK for every telegram, mode and baud changes, the variant switch, measured values
-on request or continuously. The pty shells in ``pty.py`` drive them.
+on request or continuously; its replies can come late (``reply_latency_s``), as a real
+one's do. The pty shells in ``pty.py`` drive them.
 """
 
 from __future__ import annotations
@@ -251,6 +252,16 @@ class CreateDevice:
         return oi.encode_stream_frame(self.stream_ids, self.take_values(self.stream_ids))
 
 
+@dataclass(frozen=True)
+class Reply:
+    """Bytes the sensor sends ``delay_s`` after it heard a telegram; its line switches to
+    ``baud_after`` once they are out (a baud change is answered at the old rate)."""
+
+    delay_s: float
+    data: bytes
+    baud_after: int | None = None
+
+
 @dataclass
 class LmsDevice:
     geometry: ScanGeometry = field(default_factory=ScanGeometry)
@@ -259,23 +270,34 @@ class LmsDevice:
     continuous: bool = False
     ranges_m: list[float] = field(default_factory=list)
     naks: int = 0
+    # Seconds it takes to answer, by telegram: the key is the start of the payload
+    # (command, data), the longest that matches wins; b"\x20" is every mode change. The
+    # ACK comes at once. A real LMS can take up to about 3 s over a mode switch
+    # (sicktoolbox, SickLMS2xx.hh: DEFAULT_SICK_LMS_2XX_SICK_SWITCH_MODE_TIMEOUT).
+    reply_latency_s: dict[bytes, float] = field(default_factory=dict)
     _parser: lms.TelegramParser = field(
         default_factory=lambda: lms.TelegramParser(expect_reply=False))
 
-    def receive(self, data: bytes) -> tuple[bytes, int | None]:
-        """Answer the host's bytes: (bytes to send, a new baud to switch to after them)."""
-        out = bytearray()
-        new_baud: int | None = None
+    def _latency(self, payload: bytes) -> float:
+        keys = [k for k in self.reply_latency_s if payload.startswith(k)]
+        return self.reply_latency_s[max(keys, key=len)] if keys else 0.0
+
+    def receive(self, data: bytes) -> list[Reply]:
+        """Answer the host's bytes, in the order the answers go out."""
+        out: list[Reply] = []
         before = self._parser.stats.bad_crc
         items = self._parser.feed(data)
         for _ in range(self._parser.stats.bad_crc - before):
-            out.append(lms.NAK)
+            out.append(Reply(0.0, bytes([lms.NAK])))
             self.naks += 1
         for item in items:
             if not isinstance(item, lms.Telegram):
                 continue
-            out.append(lms.ACK)
+            out.append(Reply(0.0, bytes([lms.ACK])))
             cmd, args = item.command, item.data
+            new_baud: int | None = None
+            answer = bytearray()
+            out_of = self._latency(bytes([cmd]) + args)
             if cmd == lms.MODE and args:
                 mode = args[0]
                 ok = mode in (lms.CONTINUOUS, lms.STOP_CONTINUOUS) or mode in lms.MODE_BAUDS
@@ -285,9 +307,9 @@ class LmsDevice:
                     self.continuous = False
                 elif mode in lms.MODE_BAUDS:
                     new_baud = lms.MODE_BAUDS[mode]
-                out += lms.reply(lms.MODE, bytes([0x00 if ok else 0x01]))
+                answer += lms.reply(lms.MODE, bytes([0x00 if ok else 0x01]))
             elif cmd == lms.REQUEST_VALUES:
-                out += self.values_telegram()
+                answer += self.values_telegram()
             elif cmd == lms.VARIANT and len(args) == 4:
                 angle = int.from_bytes(args[0:2], "little")
                 res = int.from_bytes(args[2:4], "little")
@@ -297,13 +319,13 @@ class LmsDevice:
                 except ValueError:
                     switched = 0
                 g = self.geometry
-                out += lms.reply(lms.VARIANT, bytes([switched]) + g.angle_deg.to_bytes(2, "little")
-                                 + g.resolution_centideg.to_bytes(2, "little"))
+                answer += lms.reply(lms.VARIANT, bytes([switched])
+                                    + g.angle_deg.to_bytes(2, "little")
+                                    + g.resolution_centideg.to_bytes(2, "little"))
             else:
-                out += lms.reply(cmd, b"")  # acknowledged, nothing to report
-        if new_baud is not None:
-            self.baud = new_baud
-        return bytes(out), new_baud
+                answer += lms.reply(cmd, b"")  # acknowledged, nothing to report
+            out.append(Reply(out_of, bytes(answer), new_baud))
+        return out
 
     def values_telegram(self) -> bytes:
         n = self.geometry.beams
