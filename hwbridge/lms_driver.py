@@ -3,7 +3,9 @@
 Start-up: find the sensor at 9600 baud (its power-up rate) or already at the target
 rate (the rate it answered at last, first, after a reconnect), stop continuous output,
 switch to the target baud (38400 by default; 500000 needs RS-422) and let the line settle,
-select the 180 degree / 0.5 degree variant, start continuous output. Every request waits
+select the 180 degree / 0.5 degree variant, read the configuration (0x74: units, 8/16/32 m
+mode, real-time indices; it says how to read every scan, and the longest range, which the
+bridge publishes as range_max), start continuous output. Every request waits
 as long as the sensor may take to answer, on a line cleared of what came before it.
 ``poll`` returns the scans that arrived, in metres. A lost port is reopened on a backoff
 and the start-up runs again.
@@ -35,13 +37,13 @@ class LmsError(Exception):
 
 
 class LmsDriver:
-    def __init__(self, port: str, baud: int = 38400, geometry: ScanGeometry | None = None,
-                 unit: int = lms.UNIT_MM) -> None:
+    def __init__(self, port: str, baud: int = 38400,
+                 geometry: ScanGeometry | None = None) -> None:
         if baud not in lms.BAUD_MODES:
             raise LmsError(f"the LMS has no {baud} baud mode (9600, 19200, 38400, 500000)")
         self.target_baud = baud
         self.geometry = geometry or ScanGeometry()
-        self.unit = unit
+        self.config = lms.LmsConfig()  # until the sensor's is read at start-up
         self.transport = SerialTransport(port, lms.POWER_UP_BAUD)
         self.parser = lms.TelegramParser(expect_reply=True)
         self.scans = 0
@@ -49,7 +51,12 @@ class LmsDriver:
         self.restarts = 0
         self._was_open = False
         self._answered_at: int | None = None  # the baud it last answered at
+        self._units_warned = False
 
+    @property
+    def range_max_m(self) -> float:
+        """The longest range the sensor's configuration can report; no return reads this."""
+        return self.config.range_max_m
     @property
     def serial_errors(self) -> int:
         s = self.parser.stats
@@ -118,6 +125,11 @@ class LmsDriver:
         if rep.data[:1] != b"\x01":
             raise LmsError(f"the sensor refused the {g.angle_deg} deg / "
                            f"{g.resolution_centideg / 100:g} deg variant")
+        rep = self._transact(lms.request_config(), lms.CONFIG_REPLY)
+        try:
+            self.config = lms.decode_config(rep.data)
+        except lms.CodecError as exc:
+            raise LmsError(f"the sensor's configuration cannot be used: {exc}") from None
         self._transact(lms.mode_change(lms.CONTINUOUS), lms.MODE_REPLY, MODE_TIMEOUT_S)
         self._was_open = True
 
@@ -149,15 +161,19 @@ class LmsDriver:
             if not isinstance(item, lms.Telegram) or item.command != lms.VALUES_REPLY:
                 continue
             try:
-                unit, raw = lms.decode_values(item.data)
+                scan = lms.decode_values(item.data, self.config)
             except lms.CodecError:
                 self.bad_scans += 1
                 continue
-            if len(raw) != self.geometry.beams:
+            if len(scan.values) != self.geometry.beams:
                 self.bad_scans += 1
                 continue
-            rmax = self.geometry.range_max_m if unit == lms.UNIT_MM else 81.83
-            out.append(lms.values_to_ranges(unit, raw, rmax))
+            if scan.unit != self.config.units and not self._units_warned:
+                self._units_warned = True
+                log.warning("the scans' unit bits (%d) disagree with the configuration's "
+                            "units (%d); reading them as the configuration says",
+                            scan.unit, self.config.units)
+            out.append(lms.values_to_ranges(scan.values, self.config))
             self.scans += 1
         return out
 

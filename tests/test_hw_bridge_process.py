@@ -12,6 +12,7 @@ from pathlib import Path
 
 from hwbridge.create import model as cm
 from hwbridge.emulators.pty import CreateEmulator, Faults, LmsEmulator
+from hwbridge.lms.codec import UNIT_CM, LmsConfig
 from tests.procutil import end, free_port, hub_session, member_args, start, unique_ns, wait_for
 from wire import Cmd, Keys, Scan, Sense, decode, encode
 
@@ -102,11 +103,14 @@ def test_create_bridge_warns_of_a_babbling_robot_and_recovers(tmp_path: Path) ->
 
 
 def test_lms_bridge_process(tmp_path: Path) -> None:
+    """An LMS measuring in cm (80 m): a 30 m return is published, range_max is the
+    sensor's."""
     ns, port = unique_ns(), free_port()
     keys = Keys(ns)
     ranges = [3.0] * 361
-    ranges[180] = 1.5
-    emu = LmsEmulator(tmp_path / "lms", lambda: ranges).start()
+    ranges[180], ranges[90], ranges[270] = 1.5, 30.0, math.inf
+    emu = LmsEmulator(tmp_path / "lms", lambda: ranges,
+                      config=LmsConfig(UNIT_CM, 0x00)).start()
     scans: list[Scan] = []
     with hub_session(ns, port) as session:
         session.declare_subscriber(keys.scan(),
@@ -121,6 +125,7 @@ def test_lms_bridge_process(tmp_path: Path) -> None:
             emu.stop()
     s = scans[-1]
     assert len(s.ranges) == 361 and s.ranges[180] == 1.5 and s.ranges[0] == 3.0
+    assert s.ranges[90] == 30.0 and s.ranges[270] == s.range_max == 81.83
     assert math.isclose(s.angle_min, -math.pi / 2) and math.isclose(s.angle_step,
                                                                       math.radians(0.5))
     assert (s.scanner_x, s.scanner_y) == (3.0, -2.0)

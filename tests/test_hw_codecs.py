@@ -189,24 +189,54 @@ def test_measured_values_mm_and_cm() -> None:
     assert geom.beams == 361
     ranges = [1.0 + 0.01 * j for j in range(geom.beams)]
     ranges[5] = math.inf
-    raw = lms.ranges_to_values(ranges, lms.UNIT_MM)
-    data = lms.encode_values(raw, lms.UNIT_MM) + b"\x10"
+    mm = lms.LmsConfig(lms.UNIT_MM)
+    raw = lms.ranges_to_values(ranges, mm)
+    data = lms.encode_values(raw, mm) + b"\x10"
     assert int.from_bytes(data[:2], "little") == 361 | 0x4000
     tel = lms.reply(lms.REQUEST_VALUES, data[:-1])
     assert len(tel) == 732  # the size HARDWARE_NOTES gives for 361 values
     (parsed,) = lms.TelegramParser().feed(tel)
     assert isinstance(parsed, lms.Telegram) and parsed.command == lms.VALUES_REPLY
-    unit, vals = lms.decode_values(parsed.data)
-    out = lms.values_to_ranges(unit, vals, geom.range_max_m)
-    assert out[5] == geom.range_max_m
+    got = lms.decode_values(parsed.data, mm)
+    assert got.unit == lms.UNIT_MM and got.status == 0x10 and got.real_time_index is None
+    out = lms.values_to_ranges(got.values, mm)
+    assert out[5] == geom.range_max_m == mm.range_max_m == 8.183
     assert out[0] == pytest.approx(1.0) and out[360] == pytest.approx(4.6)
-    cm_data = lms.encode_values(lms.ranges_to_values([2.5, 30.0], lms.UNIT_CM), lms.UNIT_CM)
-    unit, vals = lms.decode_values(cm_data + b"\x10")
-    assert unit == lms.UNIT_CM and vals == [250, 3000]
-    assert lms.values_to_ranges(unit, vals, 81.83) == pytest.approx([2.5, 30.0])
+    cm = lms.LmsConfig(lms.UNIT_CM)
+    cm_data = lms.encode_values(lms.ranges_to_values([2.5, 30.0], cm), cm)
+    got = lms.decode_values(cm_data + b"\x10", cm)
+    assert got.unit == lms.UNIT_CM and got.values == [250, 3000]
+    assert lms.values_to_ranges(got.values, cm) == pytest.approx([2.5, 30.0])
+    assert cm.range_max_m == 81.83
     # flag bits above the 13 distance bits are masked off
     flagged = (361 | 0x4000).to_bytes(2, "little") + (0x2000 | 1500).to_bytes(2, "little") * 361
-    assert lms.decode_values(flagged + b"\x10")[1][0] == 1500
+    assert lms.decode_values(flagged + b"\x10").values[0] == 1500
+
+
+def test_configuration_sets_range_bits_units_and_real_time_indices() -> None:
+    # the 0xF4 reply: availability at byte 4, measuring mode at 5, units at 6
+    data = lms.encode_config(lms.LmsConfig(lms.UNIT_MM, 0x04, lms.REAL_TIME_INDICES))
+    assert len(data) == 34 and data[4:7] == bytes([0x02, 0x04, 0x01])
+    config = lms.decode_config(data + b"\x10")
+    assert config == lms.LmsConfig(lms.UNIT_MM, 0x04, 0x02)
+    assert config.range_bits == 14 and config.range_max_m == 16.375
+    assert config.real_time_indices
+    # 16 m in mm: 12.5 m needs the 14th bit; the real-time index is one byte more
+    raw = lms.ranges_to_values([12.5, math.inf], config)
+    assert raw == [12500, 16375]
+    got = lms.decode_values(lms.encode_values(raw, config, 300) + b"\x10", config)
+    assert got.values == raw and got.real_time_index == 300 % 256
+    assert lms.values_to_ranges(got.values, config) == [12.5, 16.375]
+    # the same bytes read as the default 8 m mode lose the bit, and the index is one too many
+    with pytest.raises(lms.CodecError):
+        lms.decode_values(lms.encode_values(raw, config, 1) + b"\x10")
+    assert lms.LmsConfig(lms.UNIT_MM, 0x06).range_max_m == 32.759
+    assert lms.LmsConfig(lms.UNIT_CM, 0x00).range_max_m == 81.83
+    for bad in ((lms.UNIT_MM, 0x3F), (0x07, 0x00)):  # reflectivity, unknown units
+        with pytest.raises(lms.CodecError):
+            lms.LmsConfig(*bad)
+    assert lms.request_config() == bytes([0x02, 0x00, 0x01, 0x00, 0x74]) + lms.crc16(
+        bytes([0x02, 0x00, 0x01, 0x00, 0x74])).to_bytes(2, "little")
 
 
 def test_telegram_parser_ack_nak_and_resync() -> None:
@@ -233,7 +263,8 @@ def test_values_round_trip_after_garbage(raw: list[int], garbage: bytes) -> None
     out = [x for x in p.feed(garbage.replace(b"\x02", b"") + tel)
            if isinstance(x, lms.Telegram)]
     assert len(out) == 1
-    assert lms.decode_values(out[0].data) == (lms.UNIT_MM, raw)
+    got = lms.decode_values(out[0].data)
+    assert (got.unit, got.values) == (lms.UNIT_MM, raw)
 
 
 def test_host_side_parser_reads_host_telegrams() -> None:

@@ -6,6 +6,7 @@ each test here failed on the drivers before the fix it names."""
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -150,6 +151,35 @@ def test_lms_start_up_waits_for_a_slow_reply(tmp_path: Path) -> None:
         assert emu.device.baud == drv.transport.baud == 38400
         scans = pump(drv, lambda: drv.scans >= 2, 10, "two scans")
         assert scans[0][0] == pytest.approx(2.0) and drv.serial_errors == 0
+    finally:
+        drv.close()
+        emu.stop()
+
+
+# --- LMS: decoding as the sensor's configuration says ---------------------------------
+
+LONG_RANGES = [2.0] * 361
+LONG_RANGES[10], LONG_RANGES[20], LONG_RANGES[30] = 12.0, 25.0, 30.0
+LONG_RANGES[40], LONG_RANGES[50] = 60.0, math.inf
+
+
+@pytest.mark.parametrize("config,range_max", [
+    (lms.LmsConfig(lms.UNIT_MM, 0x00), 8.183),
+    (lms.LmsConfig(lms.UNIT_MM, 0x04), 16.375),
+    (lms.LmsConfig(lms.UNIT_MM, 0x06), 32.759),
+    (lms.LmsConfig(lms.UNIT_CM, 0x00), 81.83),
+    (lms.LmsConfig(lms.UNIT_MM, 0x00, lms.REAL_TIME_INDICES), 8.183),
+], ids=["mm-8m", "mm-16m", "mm-32m", "cm-80m", "mm-8m-real-time-indices"])
+def test_lms_scans_read_as_the_sensor_is_configured(tmp_path: Path, config: lms.LmsConfig,
+                                                    range_max: float) -> None:
+    emu = LmsEmulator(tmp_path / "lms", lambda: LONG_RANGES, config=config).start()
+    drv = LmsDriver(emu.path, baud=500000)
+    try:
+        drv.open()
+        scans = pump(drv, lambda: drv.scans >= 2, 10, "two scans")
+        want = [r if r < range_max else range_max for r in LONG_RANGES]
+        assert scans[-1] == pytest.approx(want, abs=0.006)
+        assert drv.range_max_m == range_max and drv.bad_scans == 0
     finally:
         drv.close()
         emu.stop()

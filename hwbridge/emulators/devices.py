@@ -11,7 +11,8 @@ in; ``babble`` makes it send noise and hear nothing (a robot at another baud rat
 noisy line). ``LmsDevice`` is a SICK LMS 2xx:
 ACK or NAK for every telegram, mode and baud changes, the variant switch, measured values
 on request or continuously; its replies can come late (``reply_latency_s``), as a real
-one's do. The pty shells in ``pty.py`` drive them.
+one's do; its configuration (``config``: units, 8/16/32 m mode, real-time indices)
+answers 0x74 and shapes every scan. The pty shells in ``pty.py`` drive them.
 """
 
 from __future__ import annotations
@@ -265,7 +266,7 @@ class Reply:
 @dataclass
 class LmsDevice:
     geometry: ScanGeometry = field(default_factory=ScanGeometry)
-    unit: int = lms.UNIT_MM
+    config: lms.LmsConfig = field(default_factory=lms.LmsConfig)
     baud: int = lms.POWER_UP_BAUD
     continuous: bool = False
     ranges_m: list[float] = field(default_factory=list)
@@ -275,6 +276,7 @@ class LmsDevice:
     # ACK comes at once. A real LMS can take up to about 3 s over a mode switch
     # (sicktoolbox, SickLMS2xx.hh: DEFAULT_SICK_LMS_2XX_SICK_SWITCH_MODE_TIMEOUT).
     reply_latency_s: dict[bytes, float] = field(default_factory=dict)
+    scans_sent: int = 0  # its real-time scan index, modulo 256 on the wire
     _parser: lms.TelegramParser = field(
         default_factory=lambda: lms.TelegramParser(expect_reply=False))
 
@@ -310,6 +312,8 @@ class LmsDevice:
                 answer += lms.reply(lms.MODE, bytes([0x00 if ok else 0x01]))
             elif cmd == lms.REQUEST_VALUES:
                 answer += self.values_telegram()
+            elif cmd == lms.REQUEST_CONFIG:
+                answer += lms.reply(lms.REQUEST_CONFIG, lms.encode_config(self.config))
             elif cmd == lms.VARIANT and len(args) == 4:
                 angle = int.from_bytes(args[0:2], "little")
                 res = int.from_bytes(args[2:4], "little")
@@ -330,5 +334,7 @@ class LmsDevice:
     def values_telegram(self) -> bytes:
         n = self.geometry.beams
         ranges = (self.ranges_m + [math.inf] * n)[:n]
+        self.scans_sent += 1
+        raw = lms.ranges_to_values(ranges, self.config)
         return lms.reply(lms.REQUEST_VALUES,
-                         lms.encode_values(lms.ranges_to_values(ranges, self.unit), self.unit))
+                         lms.encode_values(raw, self.config, self.scans_sent))

@@ -31,6 +31,7 @@ from pathlib import Path
 
 from hwbridge.create.model import ModelSpec
 from hwbridge.emulators.devices import CreateDevice, LmsDevice, PowerPlan
+from hwbridge.lms.codec import LmsConfig
 
 # termios speed codes of the rates the devices use
 _SPEEDS = {rate: getattr(termios, f"B{rate}", None)
@@ -247,14 +248,16 @@ class CreateEmulator(_Emulator):
 
 class LmsEmulator(_Emulator):
     """A SICK LMS 2xx on a pty; ``ranges`` gives the scene's current ranges;
-    ``reply_latency_s`` how late it answers which telegrams (``devices.LmsDevice``)."""
+    ``reply_latency_s`` how late it answers which telegrams, ``config`` its units, range
+    mode and real-time indices (``devices.LmsDevice``)."""
 
     def __init__(self, link: str | Path, ranges: Callable[[], list[float]] | None = None,
                  faults: Faults | None = None, *,
                  reply_latency_s: dict[bytes, float] | None = None,
-                 check_baud: bool = False) -> None:
+                 config: LmsConfig | None = None, check_baud: bool = False) -> None:
         super().__init__(link, faults, check_baud)
-        self.device = LmsDevice(reply_latency_s=dict(reply_latency_s or {}))
+        self.device = LmsDevice(config=config or LmsConfig(),
+                                reply_latency_s=dict(reply_latency_s or {}))
         self.ranges = ranges
         self.scans = 0
 
