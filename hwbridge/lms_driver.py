@@ -5,7 +5,8 @@ rate (the rate it answered at last, first, after a reconnect), stop continuous o
 switch to the target baud (38400 by default; 500000 needs RS-422) and let the line settle,
 select the 180 degree / 0.5 degree variant, read the configuration (0x74: units, 8/16/32 m
 mode, real-time indices; it says how to read every scan, and the longest range, which the
-bridge publishes as range_max), start continuous output. Every request waits
+bridge publishes as range_max), start continuous output. Scans whose status says the
+sensor has a fatal error, and partial scans, are dropped and counted. Every request waits
 as long as the sensor may take to answer, on a line cleared of what came before it.
 ``poll`` returns the scans that arrived, in metres. A lost port is reopened on a backoff
 and the start-up runs again.
@@ -48,6 +49,8 @@ class LmsDriver:
         self.parser = lms.TelegramParser(expect_reply=True)
         self.scans = 0
         self.bad_scans = 0
+        self.fatal_scans = 0  # dropped: the sensor's status said "fatal error"
+        self.partial_scans = 0  # dropped: one pass of an interlaced scan, not a scan
         self.restarts = 0
         self._was_open = False
         self._answered_at: int | None = None  # the baud it last answered at
@@ -164,6 +167,18 @@ class LmsDriver:
                 scan = lms.decode_values(item.data, self.config)
             except lms.CodecError:
                 self.bad_scans += 1
+                continue
+            if scan.fatal:
+                self.fatal_scans += 1
+                if self.fatal_scans == 1 or self.fatal_scans % 1000 == 0:
+                    log.warning("the sensor reports a fatal error (status 0x%02X): its scans "
+                                "are dropped (%d so far)", scan.status, self.fatal_scans)
+                continue
+            if scan.partial:
+                self.partial_scans += 1
+                if self.partial_scans == 1:
+                    log.warning("the sensor sends partial scans (index bits 0x%X): they are "
+                                "dropped; is it in an interlaced output mode?", scan.partial)
                 continue
             if len(scan.values) != self.geometry.beams:
                 self.bad_scans += 1

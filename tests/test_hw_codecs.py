@@ -239,6 +239,17 @@ def test_configuration_sets_range_bits_units_and_real_time_indices() -> None:
         bytes([0x02, 0x00, 0x01, 0x00, 0x74])).to_bytes(2, "little")
 
 
+def test_measured_values_status_and_partial_bits() -> None:
+    raw = [1000] * 361
+    whole = lms.decode_values(lms.encode_values(raw) + b"\x10")
+    assert not whole.fatal and whole.partial == 0
+    assert lms.decode_values(lms.encode_values(raw) + b"\x14").fatal  # bits 0-2: 4
+    assert not lms.decode_values(lms.encode_values(raw) + b"\x13").fatal  # 3, an error
+    data = lms.encode_values(raw, partial=0b101)  # flag and index 1 (0.25 degrees)
+    assert int.from_bytes(data[:2], "little") == 361 | 0x2800 | 0x4000
+    assert lms.decode_values(data + b"\x10").partial == 0b101
+
+
 def test_telegram_parser_ack_nak_and_resync() -> None:
     good = lms.reply(lms.MODE, b"\x00")
     bad = bytearray(good)

@@ -183,3 +183,27 @@ def test_lms_scans_read_as_the_sensor_is_configured(tmp_path: Path, config: lms.
     finally:
         drv.close()
         emu.stop()
+
+
+# --- LMS: scans the sensor itself says are not to be used -----------------------------
+
+
+@pytest.mark.parametrize("flag", ["fatal", "partial_scans"])
+def test_lms_drops_and_counts_fatal_and_partial_scans(tmp_path: Path, flag: str) -> None:
+    emu = LmsEmulator(tmp_path / "lms", lambda: RANGES).start()
+    setattr(emu.device, flag, True)
+    drv = LmsDriver(emu.path, baud=500000)
+    try:
+        drv.open()
+        sent = emu.scans
+        got = pump(drv, lambda: emu.scans >= sent + 5, 10, "five scans sent")
+        pump(drv, lambda: drv.parser.stats.telegrams >= 5, 5, "them read")
+        assert not got and drv.scans == 0  # none used...
+        assert (drv.fatal_scans if flag == "fatal" else drv.partial_scans) > 0  # ...counted
+        with emu.lock:
+            setattr(emu.device, flag, False)  # whole, healthy scans again: used
+        pump(drv, lambda: drv.scans >= 2, 10, "two good scans")
+        assert drv.bad_scans == 0
+    finally:
+        drv.close()
+        emu.stop()

@@ -12,7 +12,9 @@ noisy line). ``LmsDevice`` is a SICK LMS 2xx:
 ACK or NAK for every telegram, mode and baud changes, the variant switch, measured values
 on request or continuously; its replies can come late (``reply_latency_s``), as a real
 one's do; its configuration (``config``: units, 8/16/32 m mode, real-time indices)
-answers 0x74 and shapes every scan. The pty shells in ``pty.py`` drive them.
+answers 0x74 and shapes every scan; ``fatal`` and ``partial_scans`` make its scans carry
+a fatal status, or come as the passes of an interlaced scan. The pty shells in ``pty.py``
+drive them.
 """
 
 from __future__ import annotations
@@ -277,6 +279,8 @@ class LmsDevice:
     # (sicktoolbox, SickLMS2xx.hh: DEFAULT_SICK_LMS_2XX_SICK_SWITCH_MODE_TIMEOUT).
     reply_latency_s: dict[bytes, float] = field(default_factory=dict)
     scans_sent: int = 0  # its real-time scan index, modulo 256 on the wire
+    fatal: bool = False  # scans carry status "fatal error" (a fault in the sensor)
+    partial_scans: bool = False  # scans come as partial scans, flag and index set
     _parser: lms.TelegramParser = field(
         default_factory=lambda: lms.TelegramParser(expect_reply=False))
 
@@ -336,5 +340,8 @@ class LmsDevice:
         ranges = (self.ranges_m + [math.inf] * n)[:n]
         self.scans_sent += 1
         raw = lms.ranges_to_values(ranges, self.config)
+        partial = 0b100 | self.scans_sent % 4 if self.partial_scans else 0
+        status = (0x10 & ~lms.STATUS_MASK) | lms.STATUS_FATAL if self.fatal else 0x10
         return lms.reply(lms.REQUEST_VALUES,
-                         lms.encode_values(raw, self.config, self.scans_sent))
+                         lms.encode_values(raw, self.config, self.scans_sent, partial),
+                         status)

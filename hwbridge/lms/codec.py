@@ -58,6 +58,15 @@ RANGE_BITS = {0x00: 13, 0x01: 13, 0x02: 13, 0x03: 14, 0x04: 14, 0x05: 15, 0x06: 
 # top of the 16 and 32 m modes' wider fields.
 ERROR_CODES = 9
 
+# A reply's status byte: bits 0-2 the sensor's state, 0 ok, 1 info, 2 warning, 3 error,
+# 4 fatal error (GearBox's SICK driver, gbxsickacfr sickdefines.h, STATUS_GENERAL_MASK).
+STATUS_MASK, STATUS_FATAL = 0x07, 0x04
+# The count word of measured values: bits 11-12 the partial scan's index (its start at
+# 0, 0.25, 0.5 or 0.75 degrees; sicktoolbox, _parseSickScanProfileB0) and bit 13 the
+# partial-scan flag. A partial scan is one pass of an interlaced scan, its beams off the
+# grid the count implies.
+PARTIAL_BITS = 0x3800
+
 
 @dataclass(frozen=True)
 class LmsConfig:
@@ -197,16 +206,23 @@ class MeasuredValues:
     unit: int  # the count word's unit bits
     status: int
     real_time_index: int | None = None
+    partial: int = 0  # bits 11-13 of the count word, shifted down: 0 for a whole scan
+
+    @property
+    def fatal(self) -> bool:
+        return self.status & STATUS_MASK == STATUS_FATAL
 
 
 def encode_values(values: list[int], config: LmsConfig | None = None,
-                  real_time_index: int = 0) -> bytes:
-    """Data of a 0xB0 reply: count word (count in bits 0-9, unit in 14-15), values and,
-    if the configuration asks for them, the real-time scan index (no status byte)."""
+                  real_time_index: int = 0, partial: int = 0) -> bytes:
+    """Data of a 0xB0 reply: count word (count in bits 0-9, partial scan in 11-13, unit in
+    14-15), values and, if the configuration asks for them, the real-time scan index (no
+    status byte)."""
     config = config or LmsConfig()
-    if len(values) > 0x3FF:
-        raise CodecError("too many values")
-    out = bytearray((len(values) | (config.units << 14)).to_bytes(2, "little"))
+    if len(values) > 0x3FF or not 0 <= partial <= 7:
+        raise CodecError("too many values, or a partial scan index past 7")
+    word = len(values) | (partial << 11) | (config.units << 14)
+    out = bytearray(word.to_bytes(2, "little"))
     for v in values:
         out += (v & 0xFFFF).to_bytes(2, "little")
     if config.real_time_indices:
@@ -227,7 +243,8 @@ def decode_values(data: bytes, config: LmsConfig | None = None) -> MeasuredValue
     mask = config.value_mask
     vals = [int.from_bytes(data[2 + 2 * j : 4 + 2 * j], "little") & mask
             for j in range(count)]
-    return MeasuredValues(vals, unit, data[-1], data[-2] if extra else None)
+    return MeasuredValues(vals, unit, data[-1], data[-2] if extra else None,
+                          (word & PARTIAL_BITS) >> 11)
 
 
 def values_to_ranges(raw: list[int], config: LmsConfig | None = None) -> list[float]:
