@@ -39,7 +39,7 @@ def pump(driver: CreateDriver | LmsDriver, cond: Callable[[], bool], timeout: fl
 # --- Create: the start burst is resent until the stream flows -----------------------
 
 
-@pytest.mark.parametrize("plan", [PowerPlan(asleep_s=1.0), PowerPlan(boot_s=1.0)],
+@pytest.mark.parametrize("plan", [PowerPlan(asleep_s=0.3), PowerPlan(boot_s=0.3)],
                          ids=["asleep", "switched-on-late"])
 def test_create_streams_once_the_robot_can_hear(tmp_path: Path, plan: PowerPlan) -> None:
     spec = cm.MODELS["create"]
@@ -58,7 +58,7 @@ def test_create_streams_once_the_robot_can_hear(tmp_path: Path, plan: PowerPlan)
 
 def test_create_restarted_after_a_reboot_mid_run(tmp_path: Path) -> None:
     spec = cm.MODELS["create"]
-    emu = CreateEmulator(tmp_path / "create", spec, plan=PowerPlan(reboot_at_s=(1.0,))).start()
+    emu = CreateEmulator(tmp_path / "create", spec, plan=PowerPlan(reboot_at_s=(0.6,))).start()
     dev = emu.device
     drv = CreateDriver(emu.path, spec)
     try:
