@@ -79,24 +79,32 @@ class LmsDriver:
 
     def _transact(self, telegram: bytes, reply_cmd: int, timeout_s: float = REPLY_TIMEOUT_S,
                   tries: int = 3) -> lms.Telegram:
-        """Send on a cleared line and wait for the reply (resending after a NAK or a
-        timeout). A reply to an earlier request that came too late is not taken for this
-        one's: it is cleared away before each send (sicktoolbox flushes the terminal buffer
-        before every request too)."""
-        for _ in range(tries):
+        """Send on a cleared line and wait for the reply, resending after a timeout (at most
+        ``tries`` sends that time out) or a NAK (the sensor heard a garbled telegram at this
+        rate: resent at once, which spends no try, up to ``tries`` times). A reply to an
+        earlier request that came too late is not taken for this one's: it is cleared away
+        before each send (sicktoolbox flushes the terminal buffer before every request
+        too)."""
+        timeouts = naks = 0
+        while timeouts < tries and naks <= tries:
             self._clear_line()
             if not self.transport.write(telegram):
                 raise LmsError("port lost during start-up")
             deadline = time.monotonic() + timeout_s
-            while time.monotonic() < deadline:
+            nak = False
+            while not nak and time.monotonic() < deadline:
                 for item in self.parser.feed(self.transport.read()):
                     if item == lms.NAK:
-                        deadline = 0.0  # resend
+                        nak = True
                         break
                     if isinstance(item, lms.Telegram) and item.command == reply_cmd:
                         return item
                 if not self.transport.is_open:
                     raise LmsError("port lost during start-up")
+            if nak:
+                naks += 1
+            else:
+                timeouts += 1
         raise LmsError(f"no reply 0x{reply_cmd:02X} from the sensor")
 
     def _start_sensor(self) -> None:

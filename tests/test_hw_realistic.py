@@ -207,3 +207,18 @@ def test_lms_drops_and_counts_fatal_and_partial_scans(tmp_path: Path, flag: str)
     finally:
         drv.close()
         emu.stop()
+
+
+def test_lms_start_up_resends_after_a_nak_at_the_right_rate(tmp_path: Path) -> None:
+    """A NAK says the sensor heard us at this rate (the telegram was garbled on the way):
+    resend there, do not go looking at another rate."""
+    emu = LmsEmulator(tmp_path / "lms", lambda: RANGES, check_baud=True)
+    emu.device.nak_next = 1
+    emu.start()
+    drv = LmsDriver(emu.path, baud=38400)
+    try:
+        drv.open()
+        assert emu.device.naks == 1 and emu.device.baud == drv.transport.baud == 38400
+    finally:
+        drv.close()
+        emu.stop()

@@ -280,6 +280,7 @@ class LmsDevice:
     reply_latency_s: dict[bytes, float] = field(default_factory=dict)
     scans_sent: int = 0  # its real-time scan index, modulo 256 on the wire
     fatal: bool = False  # scans carry status "fatal error" (a fault in the sensor)
+    nak_next: int = 0  # the next telegrams heard are NAKed, as if a glitch corrupted them
     partial_scans: bool = False  # scans come as partial scans, flag and index set
     _parser: lms.TelegramParser = field(
         default_factory=lambda: lms.TelegramParser(expect_reply=False))
@@ -298,6 +299,11 @@ class LmsDevice:
             self.naks += 1
         for item in items:
             if not isinstance(item, lms.Telegram):
+                continue
+            if self.nak_next > 0:
+                self.nak_next -= 1
+                self.naks += 1
+                out.append(Reply(0.0, bytes([lms.NAK])))
                 continue
             out.append(Reply(0.0, bytes([lms.ACK])))
             cmd, args = item.command, item.data
