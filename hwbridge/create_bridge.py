@@ -6,7 +6,10 @@ upward IR sensor on the cargo bay analog input, algae from a cargo bay digital i
 odometry since the previous tick. Takes ``Cmd`` from ``keys.cmd(I)`` and drives the
 wheels at once (Drive Direct, wheel limits kept); the watchdog stops the wheels when
 commands stop. A lost port is logged, counted, reopened on a backoff, and the robot
-restarted with its wheels stopped. On exit it prints its counters as one JSON line.
+restarted with its wheels stopped; a robot that does not stream (asleep, switched on late,
+rebooted) is sent the start burst again until it does, with a warning every 10 s while
+it stays silent or sends only garbage. On exit it prints its counters as
+one JSON line.
 """
 
 from __future__ import annotations
@@ -167,5 +170,7 @@ def main(argv: list[str] | None = None) -> int:
         "bytes_out": ts.bytes_out, "wall_s": round(wall, 3),
         "bytes_per_s": round((ts.bytes_in + ts.bytes_out) / wall, 1) if wall > 0 else None,
         "watchdog_trips": driver.watchdog.trips, "mode_recoveries": driver.mode_recoveries,
+        "start_bursts": driver.link.bursts, "stream_losses": driver.link.losses,
+        "no_stream_warnings": driver.link.warnings,
         **counts}), flush=True)
     return 0

@@ -1,8 +1,10 @@
 """``btrack bridge lms``: a SICK LMS 2xx on the bus (the base station's laser).
 
-Starts the sensor (baud change, 180 degree / 0.5 degree variant, continuous output) and
-publishes every scan as a ``Scan`` on ``keys.scan()``, in metres, with the scanner's
-pose from the command line (where it stands in the edge's frame). A lost port is logged,
+Starts the sensor (baud change, 180 degree / 0.5 degree variant, its configuration read,
+continuous output) and publishes every scan as a ``Scan`` on ``keys.scan()``, in metres,
+with range_max the longest range the sensor's units and range mode can report (8.183 m
+in mm at 8 m, 81.83 m in cm) and the scanner's pose from the command line (where it
+stands in the edge's frame). A lost port is logged,
 counted and reopened, and the sensor started again. On exit it prints its counters
 (scans, scan rate, serial bytes per second, errors) as one JSON line.
 """
@@ -17,6 +19,7 @@ import sys
 import time
 
 from hwbridge.common import add_epoch_arg, on_stop, parse_floats
+from hwbridge.lms.codec import UNIT_MM
 from hwbridge.lms.model import ScanGeometry
 from hwbridge.lms_driver import LmsDriver, LmsError
 from hwbridge.runclock import RunClock
@@ -90,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
                     pub.put(encode(Scan(
                         t=clock.t(now), k=k, ranges=ranges, scanner_x=x, scanner_y=y,
                         scanner_theta=theta, angle_min=geometry.angle_min,
-                        angle_step=geometry.angle_step, range_max=geometry.range_max_m)))
+                        angle_step=geometry.angle_step, range_max=driver.range_max_m)))
                     k += 1
         finally:
             driver.close()
@@ -103,6 +106,11 @@ def main(argv: list[str] | None = None) -> int:
         "bytes_per_s": round((ts.bytes_in + ts.bytes_out) / wall, 1) if wall > 0 else None,
         "baud": driver.transport.baud, "serial_errors": driver.serial_errors,
         "bad_crc": ps.bad_crc, "bad_header": ps.bad_header, "naks": ps.naks,
-        "bad_scans": driver.bad_scans, "port_losses": ts.losses, "restarts": driver.restarts,
+        "bad_scans": driver.bad_scans, "fatal_scans": driver.fatal_scans,
+        "partial_scans": driver.partial_scans, "port_losses": ts.losses,
+        "restarts": driver.restarts,
+        "units": "mm" if driver.config.units == UNIT_MM else "cm",
+        "measuring_mode": driver.config.measuring_mode, "range_max": driver.range_max_m,
+        "real_time_indices": driver.config.real_time_indices,
     }), flush=True)
     return 0

@@ -111,6 +111,14 @@ class SerialTransport:
         self.stats.bytes_out += len(data)
         return True
 
+    def discard_input(self) -> None:
+        """Throw away what arrived and was not read yet (a reply to an earlier request)."""
+        if self._serial is not None:
+            try:
+                self._serial.reset_input_buffer()
+            except (serial.SerialException, OSError) as exc:
+                self._lost(exc)
+
     def set_baud(self, baud: int) -> None:
         self.baud = baud
         if self._serial is not None:

@@ -12,6 +12,7 @@ from pathlib import Path
 
 from hwbridge.create import model as cm
 from hwbridge.emulators.pty import CreateEmulator, Faults, LmsEmulator
+from hwbridge.lms.codec import UNIT_CM, LmsConfig
 from tests.procutil import end, free_port, hub_session, member_args, start, unique_ns, wait_for
 from wire import Cmd, Keys, Scan, Sense, decode, encode
 
@@ -70,12 +71,46 @@ def test_create_bridge_process(tmp_path: Path) -> None:
     assert "Traceback" not in (tmp_path / "bridge.log").read_text()
 
 
+def test_create_bridge_warns_of_a_babbling_robot_and_recovers(tmp_path: Path) -> None:
+    """A Create that sends only garbage from the start (issue 19, item 5): the bridge says
+    so, rate-limited and counted, keeps trying, and publishes once the robot answers."""
+    ns, port = unique_ns(), free_port()
+    keys = Keys(ns)
+    emu = CreateEmulator(tmp_path / "create0", cm.MODELS["create"])
+    emu.device.babble = True
+    emu.start()
+    log = tmp_path / "bridge.log"
+    senses: list[Sense] = []
+    with hub_session(ns, port) as session:
+        session.declare_subscriber(keys.sense(0),
+                                   lambda s: senses.append(decode(Sense, s.payload.to_bytes())))
+        proc = start(["bridge", "create", "--port", emu.path, "--id", "0",
+                      *member_args(ns, port)], log=log)
+        try:
+            wait_for(lambda: "no valid sensor frame" in log.read_text(), 20, "the warning")
+            assert not senses and proc.poll() is None
+            with emu.lock:
+                emu.device.babble = False  # the robot starts answering
+            wait_for(lambda: len(senses) >= 3, 20, "Sense once the robot answers")
+        finally:
+            end(proc)
+            emu.stop()
+    summary = _summary(proc)
+    assert proc.returncode == 0
+    assert summary["no_stream_warnings"] >= 1 and summary["sense"] >= 3
+    assert summary["start_bursts"] >= 2 and summary["skipped_bytes"] > 0
+    assert "Traceback" not in log.read_text()
+
+
 def test_lms_bridge_process(tmp_path: Path) -> None:
+    """An LMS measuring in cm (80 m): a 30 m return is published, range_max is the
+    sensor's."""
     ns, port = unique_ns(), free_port()
     keys = Keys(ns)
     ranges = [3.0] * 361
-    ranges[180] = 1.5
-    emu = LmsEmulator(tmp_path / "lms", lambda: ranges).start()
+    ranges[180], ranges[90], ranges[270] = 1.5, 30.0, math.inf
+    emu = LmsEmulator(tmp_path / "lms", lambda: ranges,
+                      config=LmsConfig(UNIT_CM, 0x00)).start()
     scans: list[Scan] = []
     with hub_session(ns, port) as session:
         session.declare_subscriber(keys.scan(),
@@ -90,6 +125,7 @@ def test_lms_bridge_process(tmp_path: Path) -> None:
             emu.stop()
     s = scans[-1]
     assert len(s.ranges) == 361 and s.ranges[180] == 1.5 and s.ranges[0] == 3.0
+    assert s.ranges[90] == 30.0 and s.ranges[270] == s.range_max == 81.83
     assert math.isclose(s.angle_min, -math.pi / 2) and math.isclose(s.angle_step,
                                                                       math.radians(0.5))
     assert (s.scanner_x, s.scanner_y) == (3.0, -2.0)

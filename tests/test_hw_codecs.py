@@ -21,6 +21,7 @@ def test_commands_bytes() -> None:
     assert oi.start() == b"\x80"
     assert oi.safe() == b"\x83"
     assert oi.full() == b"\x84"
+    assert oi.stop() == b"\xad"  # 173, the Create 2's
     assert oi.baud(57600) == bytes([129, 10])
     assert oi.baud(115200) == bytes([129, 11])
     # drive direct: right 200 mm/s, left -200 mm/s, big-endian signed
@@ -45,7 +46,7 @@ def test_stream_frame_worked_by_hand() -> None:
 
 
 FULL_VALUES = {7: 0x03, 19: -120, 20: 45, 21: 2, 22: 16200, 25: 2500, 26: 3000, 32: 0x01,
-               33: 1023, 35: 2, 43: 65535, 44: 1}
+               33: 1023, 35: 2, 39: -200, 40: 32767, 41: 150, 42: -150, 43: 65535, 44: 1}
 
 
 def test_every_packet_round_trips() -> None:
@@ -188,24 +189,65 @@ def test_measured_values_mm_and_cm() -> None:
     assert geom.beams == 361
     ranges = [1.0 + 0.01 * j for j in range(geom.beams)]
     ranges[5] = math.inf
-    raw = lms.ranges_to_values(ranges, lms.UNIT_MM)
-    data = lms.encode_values(raw, lms.UNIT_MM) + b"\x10"
+    mm = lms.LmsConfig(lms.UNIT_MM)
+    raw = lms.ranges_to_values(ranges, mm)
+    data = lms.encode_values(raw, mm) + b"\x10"
     assert int.from_bytes(data[:2], "little") == 361 | 0x4000
     tel = lms.reply(lms.REQUEST_VALUES, data[:-1])
     assert len(tel) == 732  # the size HARDWARE_NOTES gives for 361 values
     (parsed,) = lms.TelegramParser().feed(tel)
     assert isinstance(parsed, lms.Telegram) and parsed.command == lms.VALUES_REPLY
-    unit, vals = lms.decode_values(parsed.data)
-    out = lms.values_to_ranges(unit, vals, geom.range_max_m)
-    assert out[5] == geom.range_max_m
+    got = lms.decode_values(parsed.data, mm)
+    assert got.unit == lms.UNIT_MM and got.status == 0x10 and got.real_time_index is None
+    out = lms.values_to_ranges(got.values, mm)
+    assert out[5] == geom.range_max_m == mm.range_max_m == 8.183
     assert out[0] == pytest.approx(1.0) and out[360] == pytest.approx(4.6)
-    cm_data = lms.encode_values(lms.ranges_to_values([2.5, 30.0], lms.UNIT_CM), lms.UNIT_CM)
-    unit, vals = lms.decode_values(cm_data + b"\x10")
-    assert unit == lms.UNIT_CM and vals == [250, 3000]
-    assert lms.values_to_ranges(unit, vals, 81.83) == pytest.approx([2.5, 30.0])
+    cm = lms.LmsConfig(lms.UNIT_CM)
+    cm_data = lms.encode_values(lms.ranges_to_values([2.5, 30.0], cm), cm)
+    got = lms.decode_values(cm_data + b"\x10", cm)
+    assert got.unit == lms.UNIT_CM and got.values == [250, 3000]
+    assert lms.values_to_ranges(got.values, cm) == pytest.approx([2.5, 30.0])
+    assert cm.range_max_m == 81.83
     # flag bits above the 13 distance bits are masked off
     flagged = (361 | 0x4000).to_bytes(2, "little") + (0x2000 | 1500).to_bytes(2, "little") * 361
-    assert lms.decode_values(flagged + b"\x10")[1][0] == 1500
+    assert lms.decode_values(flagged + b"\x10").values[0] == 1500
+
+
+def test_configuration_sets_range_bits_units_and_real_time_indices() -> None:
+    # the 0xF4 reply: availability at byte 4, measuring mode at 5, units at 6
+    data = lms.encode_config(lms.LmsConfig(lms.UNIT_MM, 0x04, lms.REAL_TIME_INDICES))
+    assert len(data) == 34 and data[4:7] == bytes([0x02, 0x04, 0x01])
+    config = lms.decode_config(data + b"\x10")
+    assert config == lms.LmsConfig(lms.UNIT_MM, 0x04, 0x02)
+    assert config.range_bits == 14 and config.range_max_m == 16.375
+    assert config.real_time_indices
+    # 16 m in mm: 12.5 m needs the 14th bit; the real-time index is one byte more
+    raw = lms.ranges_to_values([12.5, math.inf], config)
+    assert raw == [12500, 16375]
+    got = lms.decode_values(lms.encode_values(raw, config, 300) + b"\x10", config)
+    assert got.values == raw and got.real_time_index == 300 % 256
+    assert lms.values_to_ranges(got.values, config) == [12.5, 16.375]
+    # the same bytes read as the default 8 m mode lose the bit, and the index is one too many
+    with pytest.raises(lms.CodecError):
+        lms.decode_values(lms.encode_values(raw, config, 1) + b"\x10")
+    assert lms.LmsConfig(lms.UNIT_MM, 0x06).range_max_m == 32.759
+    assert lms.LmsConfig(lms.UNIT_CM, 0x00).range_max_m == 81.83
+    for bad in ((lms.UNIT_MM, 0x3F), (0x07, 0x00)):  # reflectivity, unknown units
+        with pytest.raises(lms.CodecError):
+            lms.LmsConfig(*bad)
+    assert lms.request_config() == bytes([0x02, 0x00, 0x01, 0x00, 0x74]) + lms.crc16(
+        bytes([0x02, 0x00, 0x01, 0x00, 0x74])).to_bytes(2, "little")
+
+
+def test_measured_values_status_and_partial_bits() -> None:
+    raw = [1000] * 361
+    whole = lms.decode_values(lms.encode_values(raw) + b"\x10")
+    assert not whole.fatal and whole.partial == 0
+    assert lms.decode_values(lms.encode_values(raw) + b"\x14").fatal  # bits 0-2: 4
+    assert not lms.decode_values(lms.encode_values(raw) + b"\x13").fatal  # 3, an error
+    data = lms.encode_values(raw, partial=0b101)  # flag and index 1 (0.25 degrees)
+    assert int.from_bytes(data[:2], "little") == 361 | 0x2800 | 0x4000
+    assert lms.decode_values(data + b"\x10").partial == 0b101
 
 
 def test_telegram_parser_ack_nak_and_resync() -> None:
@@ -232,7 +274,8 @@ def test_values_round_trip_after_garbage(raw: list[int], garbage: bytes) -> None
     out = [x for x in p.feed(garbage.replace(b"\x02", b"") + tel)
            if isinstance(x, lms.Telegram)]
     assert len(out) == 1
-    assert lms.decode_values(out[0].data) == (lms.UNIT_MM, raw)
+    got = lms.decode_values(out[0].data)
+    assert (got.unit, got.values) == (lms.UNIT_MM, raw)
 
 
 def test_host_side_parser_reads_host_telegrams() -> None:
@@ -259,3 +302,70 @@ def test_scan_message_on_the_wire() -> None:
         with pytest.raises(DecodeError):
             decode(Scan, encode(bad))
 
+
+
+def test_start_link_resends_until_the_stream_flows() -> None:
+    from hwbridge.create import link as ln
+
+    link = ln.StartLink(ln.LinkTiming(retry_s=0.5, tries=3, slow_retry_s=2.0, lost_s=1.0))
+    link.restart(0.0)
+    sent = [t / 10 for t in range(0, 100) if link.step(t / 10).send_burst]
+    # three quick tries, then a slower retry every 2 s (the give-up reported once)
+    assert sent[:3] == [0.0, 0.5, 1.0] and sent[3:5] == [3.5, 5.5]
+    assert link.state == ln.RETRYING and link.bursts == len(sent)
+    link.frame(10.0)
+    assert link.state == ln.STREAMING
+    assert link.step(10.9) == ln.Step(False)  # frames may be late...
+    step = link.step(11.1)  # ...but a stream silent for lost_s has stopped
+    assert step == ln.Step(True, (ln.STREAM_LOST,)) and link.state == ln.STARTING
+    link.frame(11.2)
+    assert link.step(11.3) == ln.Step(False) and link.losses == 1
+    link.restart(20.0)  # the port was reopened: a burst at once
+    assert link.step(20.0).send_burst
+
+
+def test_start_link_reports_giving_up_once() -> None:
+    from hwbridge.create import link as ln
+
+    link = ln.StartLink(ln.LinkTiming(retry_s=0.5, tries=2))
+    link.restart(0.0)
+    reports = [r for t in range(0, 100) for r in link.step(t / 10).reports]
+    assert reports.count(ln.GAVE_UP) == 1
+
+
+def test_start_link_warns_while_no_frame_comes_rate_limited() -> None:
+    from hwbridge.create import link as ln
+
+    link = ln.StartLink(ln.LinkTiming(warn_after_s=2.0, warn_every_s=10.0))
+    link.restart(0.0)
+    warned = [t / 10 for t in range(0, 300) if ln.NO_STREAM in link.step(t / 10).reports]
+    assert warned == [2.0, 12.0, 22.0] and link.warnings == 3
+    link.frame(30.0)
+    assert not [t for t in range(31, 60) if link.step(t / 2).reports]  # streaming: quiet
+    link.frame(60.0)
+    warned = [t / 10 for t in range(600, 700) if ln.NO_STREAM in link.step(t / 10).reports]
+    assert warned == [62.0]  # lost at 61.0 s; the warning counts from the last frame
+
+
+def test_packet_odometry_bounds_the_requested_motion_by_the_packets() -> None:
+    po = cm.PacketOdometry(wheel_base_m=0.25, period_s=0.015)
+    safe = {7: 0, 35: 2}
+    # a slow spin, +-50 mm/s: 0 mm and 0.34 degrees a frame, read as 0 and 0
+    turn = {**safe, 19: 0, 20: 0, 41: 50, 42: -50}
+    d, th = po.step(turn)
+    assert d == 0.0 and th == pytest.approx(100 * 0.015 / 250)  # rad: (vr - vl) t / base
+    # stalled against a wall: asked to spin fast, the packets read nothing; believed no
+    # further than a degree a frame
+    po.reset()
+    d, th = po.step({**safe, 19: 0, 20: 0, 41: 500, 42: -500})
+    assert th == pytest.approx(math.radians(1.0))
+    # the request and the packets agree within a unit: the request's finer figure stands
+    po.reset()
+    d, th = po.step({**safe, 19: 7, 20: 0, 41: 500, 42: 500})
+    assert d == pytest.approx(0.0075)
+    # wheels not driven (passive mode, or a wheel dropped): the packets as they are
+    po.reset()
+    assert po.step({7: 0, 35: 1, 19: 123, 20: 10, 41: 500, 42: -500}) == pytest.approx(
+        (0.123, math.radians(10)))
+    po.reset()
+    assert po.step({**safe, 7: 0x08, 19: 5, 20: 0, 41: 500, 42: 500})[0] == 0.005

@@ -10,15 +10,19 @@ specification (2016): a stream frame is header 19, a byte count n, n bytes of
 modulo 256; 16-bit values are big-endian; distance (19, mm) and angle (20, degrees,
 counter-clockwise positive) are signed; packet 32 holds the cargo-bay digital inputs
 (bit 0 = input 0, pin 17), packet 33 the cargo-bay analog input (pin 4, 10 bits,
-0..1023 for 0..5 V), packet 35 the OI mode (0 off, 1 passive, 2 safe, 3 full).
+0..1023 for 0..5 V), packet 35 the OI mode (0 off, 1 passive, 2 safe, 3 full), packets
+39 to 42 the velocity and radius last requested with Drive and the right and left wheel
+velocities last requested with Drive Direct (signed, mm/s and mm; Create OI
+specification 2006, p. 21).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-# opcodes
-START, BAUD, CONTROL, SAFE, FULL = 128, 129, 130, 131, 132
+# opcodes (Stop, 173, only in the Create 2's OI: it ends the OI, the robot back in off
+# mode with no stream; Create 2 OI specification 2016)
+START, BAUD, CONTROL, SAFE, FULL, STOP = 128, 129, 130, 131, 132, 173
 DRIVE, DRIVE_DIRECT = 137, 145
 SENSORS, STREAM, QUERY_LIST, PAUSE_RESUME = 142, 148, 149, 150
 STREAM_HEADER = 19
@@ -36,12 +40,16 @@ PACKETS: dict[int, tuple[int, bool]] = {
     32: (1, False),  # cargo bay digital inputs (Create)
     33: (2, False),  # cargo bay analog signal, 10 bits (Create)
     35: (1, False),  # OI mode
+    39: (2, True),  # requested velocity, mm/s, of the last Drive
+    40: (2, True),  # requested radius, mm, of the last Drive
+    41: (2, True),  # requested right wheel velocity, mm/s, of the last Drive Direct
+    42: (2, True),  # requested left wheel velocity, mm/s, of the last Drive Direct
     43: (2, False),  # left encoder counts (Create 2), a wrapping 16-bit counter
     44: (2, False),  # right encoder counts (Create 2)
 }
 
 # What each model's bridge streams.
-CREATE_STREAM = (7, 19, 20, 21, 22, 25, 26, 32, 33, 35)
+CREATE_STREAM = (7, 19, 20, 21, 22, 25, 26, 32, 33, 35, 41, 42)
 CREATE2_STREAM = (7, 21, 22, 25, 26, 35, 43, 44)
 
 # Baud codes of opcode 129 (OI specification table).
@@ -50,7 +58,7 @@ BAUD_CODES = {300: 0, 600: 1, 1200: 2, 2400: 3, 4800: 4, 9600: 5, 14400: 6, 1920
 
 # Data bytes after each opcode; None means "a count byte, then that many bytes".
 COMMAND_ARGS: dict[int, int | None] = {
-    START: 0, BAUD: 1, CONTROL: 0, SAFE: 0, FULL: 0, DRIVE: 4, DRIVE_DIRECT: 4,
+    START: 0, BAUD: 1, CONTROL: 0, SAFE: 0, FULL: 0, STOP: 0, DRIVE: 4, DRIVE_DIRECT: 4,
     SENSORS: 1, STREAM: None, QUERY_LIST: None, PAUSE_RESUME: 1,
 }
 
@@ -81,6 +89,10 @@ def safe() -> bytes:
 
 def full() -> bytes:
     return bytes([FULL])
+
+
+def stop() -> bytes:
+    return bytes([STOP])
 
 
 def baud(rate: int) -> bytes:

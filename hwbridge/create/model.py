@@ -3,8 +3,10 @@ command watchdog. Pure: the caller passes every time stamp.
 
 Odometry (HARDWARE_NOTES, checked against the OI specifications and users' reports):
 the original Create reports distance (packet 19, mm, mean of both wheels) and angle
-(packet 20, degrees, counter-clockwise positive) since the previous read; the Create 2's
-angle packet is known to be wrong, so there we use the wheel encoder counts
+(packet 20, degrees, counter-clockwise positive) since the previous read, in whole units,
+and older firmware drops the rest at every read, so that read every 15 ms they miss
+anything slower than 1 unit a frame (``PacketOdometry`` says what we do about it); the
+Create 2's angle packet is known to be wrong, so there we use the wheel encoder counts
 (packets 43, 44: 16-bit counters that wrap), 508.8 counts per revolution of a 72 mm
 wheel, wheel base 235 mm.
 """
@@ -23,6 +25,7 @@ CREATE_WHEEL_BASE_M = 0.258  # original Create, HARDWARE_NOTES ("about 258 mm")
 CREATE2_WHEEL_BASE_M = 0.235
 
 MODES = {0: "off", 1: "passive", 2: "safe", 3: "full"}
+STREAM_PERIOD_S = 0.015  # one stream frame every 15 ms (OI specifications, Stream)
 
 
 @dataclass(frozen=True)
@@ -35,13 +38,14 @@ class ModelSpec:
     stream_ids: tuple[int, ...]
     odometry: str  # "packets" (19/20) or "encoders" (43/44)
     cargo_bay: bool  # has the cargo bay analog and digital inputs
+    oi_stop: bool = False  # its OI has Stop (173): the Create 2's; the original Create's not
 
 
 MODELS = {
     "create": ModelSpec("create", 57600, CREATE_WHEEL_BASE_M, codec.CREATE_STREAM, "packets",
                         True),
     "create2": ModelSpec("create2", 115200, CREATE2_WHEEL_BASE_M, codec.CREATE2_STREAM,
-                         "encoders", False),
+                         "encoders", False, oi_stop=True),
 }
 
 
@@ -82,6 +86,57 @@ def wrap_counts(new: int, old: int) -> int:
     return ((new - old + 0x8000) & 0xFFFF) - 0x8000
 
 
+def _within_a_unit(estimate: float, reported: int) -> float:
+    return min(reported + 1.0, max(reported - 1.0, estimate))
+
+
+class PacketOdometry:
+    """One frame's motion of an original Create, from packets 19 and 20 and the wheel
+    velocities it was asked for (packets 41 and 42).
+
+    The original Create has no encoder packets (43/44 are the Create 2's), and its
+    distance and angle come in whole mm and degrees; firmware older than 3.4.1 drops the
+    remainder at every read (libcreate issue 22), so read every 15 ms a turn slower than
+    about 67 deg/s, or a drive slower than 67 mm/s, reads as none (AutonomyLab
+    create_robot issue 28). Reading less often only lowers that floor and still loses up
+    to a unit a read. What we do instead: integrate the wheel velocities the robot reports
+    as requested (mean of this frame's and the previous frame's, over the 15 ms stream
+    period) and keep the result within one unit of what the packets read. Whether the
+    firmware keeps its remainder, drops it or rounds, a frame's true motion lies within
+    one unit of its reading, so the bound never spoils a good estimate; and it keeps a
+    bad one (wheels slipping or stalled against something: the request is not the motion)
+    from straying further than the packets allow, which is why integrating the request
+    alone, which libcreate's users tried, drifts. Where no wheel is asked to turn (the
+    wheels stopped, passive or off mode, a wheel dropped) the robot moves only if pushed,
+    and the packets are all we know: their readings are used as they are.
+    """
+
+    def __init__(self, wheel_base_m: float, period_s: float = STREAM_PERIOD_S) -> None:
+        self.wheel_base_m = wheel_base_m
+        self.period_s = period_s
+        self._requested: tuple[int, int] | None = None
+
+    def reset(self) -> None:
+        self._requested = None
+
+    def step(self, values: dict[int, int]) -> tuple[float, float]:
+        """(distance m, heading change rad) of the frame ``values``."""
+        dist_mm, angle_deg = values[19], values[20]
+        driven = (MODES.get(values.get(35, 0)) in ("safe", "full")
+                  and not values.get(7, 0) & 0x1C)
+        now = (values[41], values[42]) if driven else (0, 0)
+        before = self._requested if self._requested is not None else now
+        self._requested = now
+        right = 0.5 * (before[0] + now[0])  # mm/s over the frame's period
+        left = 0.5 * (before[1] + now[1])
+        if right == 0.0 and left == 0.0:
+            return dist_mm / 1000.0, math.radians(angle_deg)
+        model_mm = 0.5 * (right + left) * self.period_s
+        model_deg = math.degrees((right - left) * self.period_s / (1000.0 * self.wheel_base_m))
+        return (_within_a_unit(model_mm, dist_mm) / 1000.0,
+                math.radians(_within_a_unit(model_deg, angle_deg)))
+
+
 class Odometry:
     """Distance and heading change accumulated from stream frames until ``take``."""
 
@@ -90,15 +145,19 @@ class Odometry:
         self._dist = 0.0
         self._dtheta = 0.0
         self._counts: tuple[int, int] | None = None
+        self._packets = PacketOdometry(spec.wheel_base_m)
 
     def reset(self) -> None:
-        """Forget the encoder reference (after a reconnect the counters moved unseen)."""
+        """Forget the encoder reference (after a reconnect the counters moved unseen) and
+        the wheel velocities last requested."""
         self._counts = None
+        self._packets.reset()
 
     def update(self, values: dict[int, int]) -> None:
         if self.spec.odometry == "packets":
-            self._dist += values[19] / 1000.0
-            self._dtheta += math.radians(values[20])
+            dist, dtheta = self._packets.step(values)
+            self._dist += dist
+            self._dtheta += dtheta
             return
         left, right = values[43], values[44]
         if self._counts is not None:

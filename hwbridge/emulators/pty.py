@@ -7,16 +7,21 @@ one behind the same name. ``CreateEmulator`` and ``LmsEmulator`` run a device co
 (``devices.py``) on a thread: they answer commands, send the Create's stream every
 15 ms, and send the LMS's scans no faster than the mirror (75 Hz, two turns per
 interlaced 0.5 degree scan) and the line (10 bits per byte at the current baud) allow.
-``Faults`` corrupts the device's output on purpose, from a seed, to test resync.
+``Faults`` corrupts the device's output on purpose, from a seed, to test resync. With
+``check_baud`` an emulator reads the baud rate the host set on the terminal and, when it
+is not the device's, hears the host's bytes as garbage and sends garbage, as a real
+serial line does (a pty on its own carries bytes whatever the rate).
 """
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import errno
 import os
 import random
 import select
+import termios
 import threading
 import time
 import tty
@@ -25,7 +30,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from hwbridge.create.model import ModelSpec
-from hwbridge.emulators.devices import CreateDevice, LmsDevice
+from hwbridge.emulators.devices import CreateDevice, LmsDevice, PowerPlan
+from hwbridge.lms.codec import LmsConfig
+
+# termios speed codes of the rates the devices use
+_SPEEDS = {rate: getattr(termios, f"B{rate}", None)
+           for rate in (9600, 19200, 38400, 57600, 115200, 500000)}
 
 CREATE_FRAME_S = 0.015
 LMS_SCAN_S = 2.0 / 75.0  # interlaced 0.5 degree scan: two mirror turns
@@ -81,6 +91,13 @@ class PtyPort:
                 return b""
             raise
 
+    def host_speed(self) -> int | None:
+        """The termios speed code the host set on its end of the line (None: unknown)."""
+        try:
+            return termios.tcgetattr(self.slave)[5] if self.plugged else None
+        except (termios.error, OSError):
+            return None
+
     def write(self, data: bytes) -> None:
         if not self.plugged:
             return
@@ -125,14 +142,36 @@ class Faults:
 
 
 class _Emulator:
-    def __init__(self, link: str | Path, faults: Faults | None) -> None:
+    def __init__(self, link: str | Path, faults: Faults | None,
+                 check_baud: bool = False) -> None:
         self.port = PtyPort(link)
         self.faults = faults or Faults()
+        self.check_baud = check_baud
         self.lock = threading.Lock()
         self.bytes_out = 0
         self.bytes_in = 0
+        self.garbled_bytes = 0  # crossed the line at a rate the other end was not at
+        self._noise = random.Random(0x5EED)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def _device_baud(self) -> int:  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    def _rates_differ(self) -> bool:
+        if not self.check_baud:
+            return False
+        host = self.port.host_speed()
+        with self.lock:
+            device = _SPEEDS.get(self._device_baud())
+        return host is not None and device is not None and host != device
+
+    def _hear(self, data: bytes) -> bytes:
+        """What the device makes of the host's bytes: nothing, at the wrong rate."""
+        if data and self._rates_differ():
+            self.garbled_bytes += len(data)
+            return b""
+        return data
 
     @property
     def path(self) -> str:
@@ -150,6 +189,9 @@ class _Emulator:
     def _send(self, data: bytes, damage: bool = True) -> None:
         if damage:
             data = self.faults.apply(data)
+        if self._rates_differ():
+            self.garbled_bytes += len(data)
+            data = bytes(self._noise.randrange(256) for _ in data)
         self.port.write(data)
         self.bytes_out += len(data)
 
@@ -158,20 +200,32 @@ class _Emulator:
 
 
 class CreateEmulator(_Emulator):
-    """An iRobot Create (or Create 2) on a pty."""
+    """An iRobot Create (or Create 2) on a pty. ``plan`` makes it asleep, switched on late
+    or rebooting (``devices.PowerPlan``; times from ``start``); ``drop_remainder`` makes its
+    odometry packets truncate as the original Create's do; ``moves`` makes it drive itself
+    at its wheel speeds each stream period (for tests without the simulator's physics)."""
 
-    def __init__(self, link: str | Path, spec: ModelSpec, faults: Faults | None = None) -> None:
-        super().__init__(link, faults)
-        self.device = CreateDevice(spec)
+    def __init__(self, link: str | Path, spec: ModelSpec, faults: Faults | None = None, *,
+                 plan: PowerPlan | None = None, drop_remainder: bool = False,
+                 moves: bool = False, check_baud: bool = False) -> None:
+        super().__init__(link, faults, check_baud)
+        self.device = CreateDevice(spec, plan=plan or PowerPlan(),
+                                   drop_remainder=drop_remainder)
+        self.moves = moves
         self.frames = 0
+        self.received = bytearray()  # every byte the host sent, for tests to read
+
+    def _device_baud(self) -> int:
+        return self.device.baud
 
     def _run(self) -> None:
-        next_frame = time.monotonic()
+        started = next_frame = time.monotonic()
         while not self._stop.is_set():
-            data = self.port.read(max(0.0, next_frame - time.monotonic()))
+            data = self._hear(self.port.read(max(0.0, next_frame - time.monotonic())))
             if data:
                 self.bytes_in += len(data)
                 with self.lock:
+                    self.received += data
                     answer = self.device.receive(data)
                 if answer:
                     self._send(answer, damage=False)
@@ -181,40 +235,65 @@ class CreateEmulator(_Emulator):
                 if now > next_frame:  # fell behind (a loaded machine): do not burst
                     next_frame = now + CREATE_FRAME_S
                 with self.lock:
+                    printed = self.device.advance(now - started)
+                    if self.moves:
+                        self.device.roll(CREATE_FRAME_S)
                     frame = self.device.stream_frame()
+                if printed:
+                    self._send(printed, damage=False)
                 if frame is not None and self.port.plugged:
                     self._send(frame)
                     self.frames += 1
 
 
 class LmsEmulator(_Emulator):
-    """A SICK LMS 2xx on a pty; ``ranges`` gives the scene's current ranges."""
+    """A SICK LMS 2xx on a pty; ``ranges`` gives the scene's current ranges;
+    ``reply_latency_s`` how late it answers which telegrams, ``config`` its units, range
+    mode and real-time indices (``devices.LmsDevice``)."""
 
     def __init__(self, link: str | Path, ranges: Callable[[], list[float]] | None = None,
-                 faults: Faults | None = None) -> None:
-        super().__init__(link, faults)
-        self.device = LmsDevice()
+                 faults: Faults | None = None, *,
+                 reply_latency_s: dict[bytes, float] | None = None,
+                 config: LmsConfig | None = None, check_baud: bool = False) -> None:
+        super().__init__(link, faults, check_baud)
+        self.device = LmsDevice(config=config or LmsConfig(),
+                                reply_latency_s=dict(reply_latency_s or {}))
         self.ranges = ranges
         self.scans = 0
+
+    def _device_baud(self) -> int:
+        return self.device.baud
 
     def _run(self) -> None:
         line_free = time.monotonic()  # when the line has sent what we wrote
         next_scan = time.monotonic()
+        pending: collections.deque[tuple[float, bytes, int | None]] = collections.deque()
         while not self._stop.is_set():
             now = time.monotonic()
             wait = max(0.0, min(0.02, next_scan - now)) if self.device.continuous else 0.02
-            data = self.port.read(wait)
+            if pending:
+                wait = max(0.0, min(wait, pending[0][0] - now))
+            data = self._hear(self.port.read(wait))
             if data:
                 self.bytes_in += len(data)
                 with self.lock:
-                    answer, _ = self.device.receive(data)
+                    replies = self.device.receive(data)
+                now = time.monotonic()
+                for r in replies:  # in order: none overtakes a late one before it
+                    due = max(now + r.delay_s, pending[-1][0] if pending else 0.0)
+                    pending.append((due, r.data, r.baud_after))
+            while pending and time.monotonic() >= pending[0][0]:
+                _, answer, baud_after = pending.popleft()
+                with self.lock:
                     baud = self.device.baud
-                if answer:
-                    # The reply goes out at the old baud; switching after it is enough here.
-                    self._send(answer, damage=False)
-                    line_free = max(line_free, time.monotonic()) + len(answer) * 10.0 / baud
+                self._send(answer, damage=False)  # at the old baud...
+                line_free = max(line_free, time.monotonic()) + len(answer) * 10.0 / baud
+                if baud_after is not None:
+                    with self.lock:
+                        self.device.baud = baud_after  # ...then the switch
             now = time.monotonic()
-            if self.device.continuous and now >= max(next_scan, line_free):
+            if (self.device.continuous and not pending
+                    and now >= max(next_scan, line_free)):
                 if self.ranges is not None:
                     self.device.ranges_m = self.ranges()
                 with self.lock:

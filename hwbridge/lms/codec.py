@@ -12,6 +12,11 @@ with their CRC: ``02 00 02 00 20 24 | 34 08`` (continuous output),
 ``02 00 02 00 20 25 | 35 08`` (stop it), ``02 00 02 00 30 01 | 31 18`` (one scan),
 ``02 00 02 00 20 42 | 52 08`` (9600 baud) and the reply
 ``02 80 03 00 A0 00 10 | 16 0A`` (mode change accepted).
+
+How to read measured values depends on the sensor's configuration, which 0x74 requests
+and 0xF4 answers (``LmsConfig``): the units (cm or mm), the measuring mode (8, 16 or
+32 m: 13, 14 or 15 bits of range in each value word, flags above them) and whether each
+scan carries a real-time scan index, one byte after the values.
 """
 
 from __future__ import annotations
@@ -25,8 +30,8 @@ REPLY_BIT = 0x80
 MAX_LENGTH = 1024  # command + data bytes; the longest LMS 2xx telegram is under 820
 
 # commands and their replies (command | 0x80)
-MODE, REQUEST_VALUES, VARIANT = 0x20, 0x30, 0x3B
-MODE_REPLY, VALUES_REPLY, VARIANT_REPLY = 0xA0, 0xB0, 0xBB
+MODE, REQUEST_VALUES, VARIANT, REQUEST_CONFIG = 0x20, 0x30, 0x3B, 0x74
+MODE_REPLY, VALUES_REPLY, VARIANT_REPLY, CONFIG_REPLY = 0xA0, 0xB0, 0xBB, 0xF4
 
 # operating modes (data byte of 0x20)
 CONTINUOUS, STOP_CONTINUOUS = 0x24, 0x25
@@ -34,9 +39,76 @@ BAUD_MODES = {38400: 0x40, 19200: 0x41, 9600: 0x42, 500000: 0x48}
 MODE_BAUDS = {v: k for k, v in BAUD_MODES.items()}
 POWER_UP_BAUD = 9600
 
-UNIT_CM, UNIT_MM = 0, 1  # bits 14-15 of the measured-value count word
-VALUE_MASK = 0x1FFF  # 13 bits of distance; the top bits of each word carry flags
-NO_RETURN_MM = 8183  # values at or above this in mm mode mean "nothing seen"
+UNIT_CM, UNIT_MM = 0, 1  # the configuration's units; also bits 14-15 of the count word
+
+# The 0xF4 reply's data, after the command byte (sicktoolbox, SickLMS2xx.cc,
+# _parseSickConfigProfile): 0-1 blanking, 2 stop threshold, 3 peak threshold or
+# sensitivity, 4 availability, 5 measuring mode, 6 measuring units, then fields,
+# contours and restart times to byte 33; then the status byte.
+CONFIG_LENGTH = 34
+CONFIG_AVAILABILITY, CONFIG_MODE, CONFIG_UNITS = 4, 5, 6
+REAL_TIME_INDICES = 0x02  # availability bit: each scan carries its real-time index
+# Bits of range in a value word, by measuring mode (sicktoolbox, SickLMS2xx.hh and
+# _extractSickMeasurementValues): 8 m (80 m in cm) with fields or reflector bits in the
+# top 3 bits; 16 m, 2 flag bits; 32 m, 1 flag bit; 0x0F 32 m with no flags. 0x3F
+# (reflectivity instead of range) is not a range mode.
+RANGE_BITS = {0x00: 13, 0x01: 13, 0x02: 13, 0x03: 14, 0x04: 14, 0x05: 15, 0x06: 15, 0x0F: 16}
+# The top values of the range field are codes, not distances: 8183 to 8191 in the 8 m
+# mode ("no return" is 8183, the 8.183 m the README quotes); the same eight codes at the
+# top of the 16 and 32 m modes' wider fields.
+ERROR_CODES = 9
+
+# A reply's status byte: bits 0-2 the sensor's state, 0 ok, 1 info, 2 warning, 3 error,
+# 4 fatal error (GearBox's SICK driver, gbxsickacfr sickdefines.h, STATUS_GENERAL_MASK).
+STATUS_MASK, STATUS_FATAL = 0x07, 0x04
+# The count word of measured values: bits 11-12 the partial scan's index (its start at
+# 0, 0.25, 0.5 or 0.75 degrees; sicktoolbox, _parseSickScanProfileB0) and bit 13 the
+# partial-scan flag. A partial scan is one pass of an interlaced scan, its beams off the
+# grid the count implies.
+PARTIAL_BITS = 0x3800
+
+
+@dataclass(frozen=True)
+class LmsConfig:
+    """What the measured values mean, from the sensor's configuration (0xF4)."""
+
+    units: int = UNIT_MM
+    measuring_mode: int = 0x00  # 8 m / 80 m, fields A, B and dazzle: the default
+    availability: int = 0x00
+
+    def __post_init__(self) -> None:
+        if self.units not in (UNIT_CM, UNIT_MM):
+            raise CodecError(f"configuration: units 0x{self.units:02X} (cm 0x00, mm 0x01)")
+        if self.measuring_mode not in RANGE_BITS:
+            raise CodecError(f"configuration: measuring mode 0x{self.measuring_mode:02X} "
+                             "gives no ranges")
+
+    @property
+    def range_bits(self) -> int:
+        return RANGE_BITS[self.measuring_mode]
+
+    @property
+    def value_mask(self) -> int:
+        return (1 << self.range_bits) - 1
+
+    @property
+    def no_return(self) -> int:
+        """The first code value: it and all above it mean no distance was measured."""
+        return self.value_mask + 1 - ERROR_CODES
+
+    @property
+    def scale_m(self) -> float:
+        return 0.001 if self.units == UNIT_MM else 0.01
+
+    @property
+    def range_max_m(self) -> float:
+        """The longest range a value can carry (8.183 m in the 8 m mode in mm, 81.83 m in
+        cm); a beam that saw nothing reads this."""
+        return round(self.no_return * self.scale_m, 3)
+
+    @property
+    def real_time_indices(self) -> bool:
+        return bool(self.availability & REAL_TIME_INDICES)
 
 
 class CodecError(ValueError):
@@ -92,6 +164,11 @@ def request_values() -> bytes:
     return build(HOST_ADDRESS, bytes([REQUEST_VALUES, 0x01]))
 
 
+def request_config() -> bytes:
+    """0x74: the sensor's configuration (answered by 0xF4)."""
+    return build(HOST_ADDRESS, bytes([REQUEST_CONFIG]))
+
+
 def variant(angle_deg: int, resolution_centideg: int) -> bytes:
     """0x3B: angular range (100 or 180 degrees) and resolution (25, 50 or 100 hundredths
     of a degree)."""
@@ -105,49 +182,88 @@ def reply(command: int, data: bytes, status: int = 0x10, address: int = 0x80) ->
     return build(address, bytes([command | REPLY_BIT]) + data + bytes([status]))
 
 
-def encode_values(values: list[int], unit: int = UNIT_MM) -> bytes:
-    """Data of a 0xB0 reply: count word (count in bits 0-9, unit in 14-15), values."""
-    if len(values) > 0x3FF:
-        raise CodecError("too many values")
-    out = bytearray((len(values) | (unit << 14)).to_bytes(2, "little"))
+def encode_config(config: LmsConfig) -> bytes:
+    """Device side: the data of a 0xF4 reply (the fields we do not read left 0)."""
+    data = bytearray(CONFIG_LENGTH)
+    data[CONFIG_AVAILABILITY] = config.availability
+    data[CONFIG_MODE] = config.measuring_mode
+    data[CONFIG_UNITS] = config.units
+    return bytes(data)
+
+
+def decode_config(data: bytes) -> LmsConfig:
+    """The configuration in a 0xF4 reply's data (status byte included)."""
+    if len(data) < CONFIG_UNITS + 2:
+        raise CodecError(f"configuration: {len(data)} bytes")
+    return LmsConfig(data[CONFIG_UNITS], data[CONFIG_MODE], data[CONFIG_AVAILABILITY])
+
+
+@dataclass(frozen=True)
+class MeasuredValues:
+    """A 0xB0 reply, read by the configuration: raw range values (flags masked off)."""
+
+    values: list[int]
+    unit: int  # the count word's unit bits
+    status: int
+    real_time_index: int | None = None
+    partial: int = 0  # bits 11-13 of the count word, shifted down: 0 for a whole scan
+
+    @property
+    def fatal(self) -> bool:
+        return self.status & STATUS_MASK == STATUS_FATAL
+
+
+def encode_values(values: list[int], config: LmsConfig | None = None,
+                  real_time_index: int = 0, partial: int = 0) -> bytes:
+    """Data of a 0xB0 reply: count word (count in bits 0-9, partial scan in 11-13, unit in
+    14-15), values and, if the configuration asks for them, the real-time scan index (no
+    status byte)."""
+    config = config or LmsConfig()
+    if len(values) > 0x3FF or not 0 <= partial <= 7:
+        raise CodecError("too many values, or a partial scan index past 7")
+    word = len(values) | (partial << 11) | (config.units << 14)
+    out = bytearray(word.to_bytes(2, "little"))
     for v in values:
         out += (v & 0xFFFF).to_bytes(2, "little")
+    if config.real_time_indices:
+        out.append(real_time_index & 0xFF)
     return bytes(out)
 
 
-def decode_values(data: bytes) -> tuple[int, list[int]]:
-    """(unit, raw 13-bit values) from a 0xB0 reply's data (status byte included)."""
-    if len(data) < 3:
+def decode_values(data: bytes, config: LmsConfig | None = None) -> MeasuredValues:
+    """A 0xB0 reply's data (status byte included), read as ``config`` says."""
+    config = config or LmsConfig()
+    extra = 1 if config.real_time_indices else 0
+    if len(data) < 3 + extra:
         raise CodecError("measured values: too short")
     word = int.from_bytes(data[0:2], "little")
     count, unit = word & 0x3FF, (word >> 14) & 0x3
-    if len(data) != 2 + 2 * count + 1:
+    if len(data) != 2 + 2 * count + extra + 1:
         raise CodecError(f"measured values: {count} announced, {len(data)} bytes")
-    vals = [int.from_bytes(data[2 + 2 * j : 4 + 2 * j], "little") & VALUE_MASK
+    mask = config.value_mask
+    vals = [int.from_bytes(data[2 + 2 * j : 4 + 2 * j], "little") & mask
             for j in range(count)]
-    return unit, vals
+    return MeasuredValues(vals, unit, data[-1], data[-2] if extra else None,
+                          (word & PARTIAL_BITS) >> 11)
 
 
-def values_to_ranges(unit: int, raw: list[int], range_max_m: float) -> list[float]:
-    """Ranges in metres; no-return codes and anything past ``range_max_m`` become it."""
-    scale = 0.001 if unit == UNIT_MM else 0.01
-    out = []
-    for v in raw:
-        r = v * scale
-        out.append(range_max_m if (unit == UNIT_MM and v >= NO_RETURN_MM) or r > range_max_m
-                   else r)
-    return out
+def values_to_ranges(raw: list[int], config: LmsConfig | None = None) -> list[float]:
+    """Ranges in metres; the codes (no return, dazzle, ...) read ``config.range_max_m``."""
+    config = config or LmsConfig()
+    scale, no_return, rmax = config.scale_m, config.no_return, config.range_max_m
+    return [rmax if v >= no_return else v * scale for v in raw]
 
 
-def ranges_to_values(ranges_m: list[float], unit: int = UNIT_MM) -> list[int]:
+def ranges_to_values(ranges_m: list[float], config: LmsConfig | None = None) -> list[int]:
     """Device side: raw values of ranges (an infinite or too long range: no return)."""
-    scale = 1000.0 if unit == UNIT_MM else 100.0
+    config = config or LmsConfig()
+    per_m = 1.0 / config.scale_m
     out = []
     for r in ranges_m:
-        if not math.isfinite(r) or r * scale >= NO_RETURN_MM:
-            out.append(NO_RETURN_MM if unit == UNIT_MM else min(VALUE_MASK, int(r * scale)))
+        if not math.isfinite(r) or round(r * per_m) >= config.no_return:
+            out.append(config.no_return)
         else:
-            out.append(max(0, int(round(r * scale))))
+            out.append(max(0, int(round(r * per_m))))
     return out
 
 
