@@ -43,9 +43,19 @@ def shared_boundary(
     """
     ref = 0.5 * (lower.hi + upper.lo)
     move = k_s * (upper.workload - lower.workload)
+    low, high = boundary_reach(lower, upper, min_len)
+    return min(max(ref + move, low), high)
+
+
+def boundary_reach(lower: SegmentView, upper: SegmentView, min_len: float
+                   ) -> tuple[float, float]:
+    """Where ``shared_boundary`` can put the boundary of two neighbours, whatever their
+    workloads: from the middle of their two views of it, at most half the slack of
+    either segment beside it (so neither gets shorter than ``min_len``)."""
+    ref = 0.5 * (lower.hi + upper.lo)
     down_room = max(0.0, 0.5 * (ref - lower.lo - min_len))
     up_room = max(0.0, 0.5 * (upper.hi - ref - min_len))
-    return ref + min(max(move, -down_room), up_room)
+    return ref - down_room, ref + up_room
 
 
 def join_segment(

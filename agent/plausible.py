@@ -9,9 +9,9 @@ a run (issue 19). Two layers, both pure:
   tick within a window of the listener's own clock, the edge the listener knows, depths
   no patrol can measure, a workload that is not the depth times the segment.
 - ``neighbour_problem``: what only the neighbour sharing a boundary can check, against
-  its own previous state and the sender's: the shared boundary where the workload law
-  (eq. 4.3, ``shared_boundary``) can put it in one tick, never past the middle of the
-  listener's own segment.
+  its own recent states and the sender's previous one: the shared boundary where the
+  workload law (eq. 4.3, ``shared_boundary``) can put it in one tick, never past the
+  middle of the listener's own segment.
 
 The sweep count (``turns``) is not judged: it jumps, rightly, whenever a robot's lower
 neighbour changes (it takes the new one's count), and that jump runs up the chain.
@@ -26,7 +26,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from agent.partition import SegmentView, shared_boundary
+from agent.partition import SegmentView, boundary_reach
 from wire.messages import AgentState
 
 MAX_AHEAD_TICKS = 10  # a neighbour's state this many ticks past our newest sensing, at most
@@ -91,16 +91,16 @@ def state_problem(s: AgentState, bounds: Bounds, newest_k: int | None,
 
 
 def neighbour_problem(s: AgentState, me: int, side: str, mine: dict[int, Claim],
-                      theirs_before: AgentState | None, k_s: float,
-                      min_segment_m: float) -> str | None:
+                      theirs_before: AgentState | None, min_segment_m: float) -> str | None:
     """The rules only a neighbour checks. ``me``: the listener's id; ``side``: "lower" if
     the sender is the listener's lower neighbour, "upper" if its upper one; ``mine``:
     the listener's own recent claims by tick; ``theirs_before``: the sender's latest
     state before ``s`` as heard, None if none.
 
     Where the sender names the listener on that side and its state of tick k-1 is here,
-    the boundary they share must be where the law puts it from the two states of k-1
-    (or of k-2, k-3 if it acted on an older one of ours), or where it was (it had not
+    the boundary they share must be where the law (``shared_boundary``) can put it from
+    that state and one of the listener's recent ones (on the wall clock, or over a slow
+    link, the sender may have acted on an older one of ours), or where it was (it had not
     heard us in time). A sender that names no neighbour on the listener's side owns the
     edge to its end by the law (it has lost sight of the listener, after a freeze: the
     two then meet in the middle), and may claim exactly that. Otherwise it may not reach
@@ -118,16 +118,18 @@ def neighbour_problem(s: AgentState, me: int, side: str, mine: dict[int, Claim],
         if abs(shared - kept) <= TOL_M:
             return None  # it kept the boundary: it had not heard us in time
         theirs = SegmentView(before.lo, before.hi, before.workload)
-        expected = []
-        for k in sorted(ks)[-3:]:
+        spans = []
+        for k in sorted(ks):
             c = mine[k]
             ours = SegmentView(c.lo, c.hi, c.workload)
-            expected.append(shared_boundary(theirs, ours, k_s, min_segment_m) if lower
-                            else shared_boundary(ours, theirs, k_s, min_segment_m))
-        if any(abs(shared - e) <= TOL_M for e in expected):
-            return None
-        return (f"the boundary it shares with us is at {shared:.6g} m; from the states of "
-                f"tick {s.k - 1} the law puts it at {expected[-1]:.6g} m")
+            low, high = (boundary_reach(theirs, ours, min_segment_m) if lower
+                         else boundary_reach(ours, theirs, min_segment_m))
+            if low - TOL_M <= shared <= high + TOL_M:
+                return None
+            spans.append((low, high))
+        low, high = spans[-1]
+        return (f"the boundary it shares with us is at {shared:.6g} m; from its state of "
+                f"tick {s.k - 1} and ours the law can put it only in [{low:.6g}, {high:.6g}] m")
     named = s.upper if lower else s.lower
     edge_end = s.edge_hi if lower else s.edge_lo
     if named == -1 and abs(shared - edge_end) <= TOL_M:

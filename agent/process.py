@@ -217,9 +217,8 @@ class AgentNode:
         side = "lower" if state.robot == lower else "upper" if state.robot == upper else None
         if side is not None:
             before = self.membership.latest(state.robot, state.k - 1)
-            why = plausible.neighbour_problem(
-                state, self.robot, side, self.claims, before, self.gains.k_s,
-                self.gains.min_segment_m)
+            why = plausible.neighbour_problem(state, self.robot, side, self.claims, before,
+                                              self.gains.min_segment_m)
             if why is not None:
                 self._reject(key, why)
                 return

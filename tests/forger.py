@@ -2,8 +2,9 @@
 messages that cannot be true. ``python -m tests.forger --ns NS --connect EP --at K``
 waits for the world's tick K, then, as robot 1, publishes a state of tick 10^9, states
 of the next ticks claiming [0, 5.9] m, one with end depths of 1.7e307 m and one that
-moves the boundary it shares with robot 2 off the law; a world tick with done = true;
-and holds a liveliness token of robot 7 (a team of three) until it is ended."""
+moves the boundary it shares with robot 2 1.5 m, beyond the law's reach; a world tick
+with done = true; and holds a liveliness token of robot 7 (a team of three) until it
+is ended."""
 
 from __future__ import annotations
 
@@ -52,8 +53,8 @@ def main() -> None:
         put(keys.state(1), encode(dataclasses.replace(
             real, k=k + 1, t=(k + 1) * 0.1, end_bins=[20], end_depths=[1.7e307])))
         put(keys.state(1), encode(dataclasses.replace(
-            real, k=k + 3, t=(k + 3) * 0.1, hi=real.hi + 0.3,
-            workload=real.depth_avg * (real.hi + 0.3 - real.lo))))
+            real, k=k + 3, t=(k + 3) * 0.1, hi=real.hi + 1.5,
+            workload=real.depth_avg * (real.hi + 1.5 - real.lo))))
         put(keys.world_tick(), encode(dataclasses.replace(tick, k=k + 2, t=(k + 2) * 0.1,
                                                           done=True)))
         token = session.liveliness().declare_token(keys.alive(7))

@@ -58,26 +58,36 @@ def test_a_chain_run_by_the_law_is_never_refused(n, ticks, seed):
             for me, side in ((i - 1, "upper"), (i + 1, "lower")):
                 if 0 <= me < n:
                     mine = {k - 1: claim(history[k - 1][me])}
-                    assert neighbour_problem(s, me, side, mine, before, K_S, MIN_SEG) is None
+                    assert neighbour_problem(s, me, side, mine, before, MIN_SEG) is None
 
 
 @settings(max_examples=60, deadline=None)
 @given(shift=st.floats(1e-4, 2.0), up=st.booleans())
-def test_a_shared_boundary_off_the_law_is_refused(shift, up):
-    # robots 1 and 2 of three at tick 4; robot 1's state of tick 5 moves their boundary
-    # somewhere the law did not put it
+def test_a_shared_boundary_beyond_the_laws_reach_is_refused(shift, up):
+    # robots 1 and 2 of three at tick 4; robot 1's state of tick 5 puts their boundary
+    # further than eq. 4.3 can move it in a tick, whatever the workloads
     r1, r2 = state(1, 4, 2.0, 4.0, 1.0), state(2, 4, 4.0, 6.0, 0.5)
-    law = chain_update([0.0, 2.0, 4.0, 6.0], [0.5 * 2, r1.workload, r2.workload], K_S, MIN_SEG)[2]
-    hi = min(5.99, max(2.01, law + (shift if up else -shift)))
-    if abs(hi - law) < 1e-5 or abs(hi - 4.0) < 1e-5:
+    low = 4.0 - 0.5 * (4.0 - 2.0 - MIN_SEG)
+    high = 4.0 + 0.5 * (6.0 - 4.0 - MIN_SEG)
+    hi = (high + shift) if up else (low - shift)
+    if not 2.01 < hi < 5.99:
         return
     forged = state(1, 5, 2.0, hi, 1.0)
-    why = neighbour_problem(forged, 2, "lower", {4: claim(r2)}, r1, K_S, MIN_SEG)
-    assert why is not None and "the law puts it at" in why
-    honest = state(1, 5, 2.0, law, 1.0)
-    assert neighbour_problem(honest, 2, "lower", {4: claim(r2)}, r1, K_S, MIN_SEG) is None
-    kept = state(1, 5, 2.0, 4.0, 1.0)  # robot 1 had not heard robot 2 in time
-    assert neighbour_problem(kept, 2, "lower", {4: claim(r2)}, r1, K_S, MIN_SEG) is None
+    why = neighbour_problem(forged, 2, "lower", {4: claim(r2)}, r1, MIN_SEG)
+    assert why is not None and "the law can put it only in" in why
+    law = chain_update([0.0, 2.0, 4.0, 6.0], [1.0, r1.workload, r2.workload], K_S, MIN_SEG)[2]
+    for honest in (law, low, high, 4.0):  # the law's own, its reach, kept
+        ok = state(1, 5, 2.0, honest, 1.0)
+        assert neighbour_problem(ok, 2, "lower", {4: claim(r2)}, r1, MIN_SEG) is None
+
+
+def test_a_boundary_from_an_older_state_of_ours_is_not_refused():
+    # on the wall clock, or over a slow link, the sender acted on our state of tick 1
+    r1 = state(1, 4, 2.0, 4.0, 1.0)
+    mine = {1: Claim(5.0, 6.0, 0.5), 2: Claim(4.6, 6.0, 0.7), 3: Claim(4.0, 6.0, 1.0)}
+    s = state(1, 5, 2.0, 5.0, 1.0)  # reachable from tick 1's [5, 6], not tick 3's
+    assert neighbour_problem(s, 2, "lower", mine, r1, MIN_SEG) is None
+    assert neighbour_problem(s, 2, "lower", {3: mine[3]}, r1, MIN_SEG) is not None
 
 
 def test_a_claim_past_the_middle_of_our_segment_is_refused_without_history():
@@ -85,23 +95,23 @@ def test_a_claim_past_the_middle_of_our_segment_is_refused_without_history():
     # issue 19: a state claiming [0, 5.9] m for a tick not heard before
     forged = state(1, 10, 0.0, 5.9, 0.5)
     assert "further into our segment" in neighbour_problem(forged, 2, "lower", mine, None,
-                                                           K_S, MIN_SEG)
+                                                           MIN_SEG)
     # naming someone else, it may not pass our middle; naming us (a robot just joining,
     # which split an older state of ours), a quarter further
     assert neighbour_problem(state(1, 10, 2.0, 5.1, upper=7), 2, "lower", mine, None,
-                             K_S, MIN_SEG) is not None
-    assert neighbour_problem(state(1, 10, 2.0, 5.1), 2, "lower", mine, None, K_S,
+                             MIN_SEG) is not None
+    assert neighbour_problem(state(1, 10, 2.0, 5.1), 2, "lower", mine, None,
                              MIN_SEG) is None
     # one that sees no neighbour on our side (it lost sight of us: a freeze) owns the
     # edge to its end by the law, and may claim exactly that, not a metre short of it
     alone = state(1, 10, 0.0, 6.0, upper=-1)
-    assert neighbour_problem(alone, 2, "lower", mine, None, K_S, MIN_SEG) is None
+    assert neighbour_problem(alone, 2, "lower", mine, None, MIN_SEG) is None
     short = state(1, 10, 0.0, 5.9, upper=-1)
-    assert neighbour_problem(short, 2, "lower", mine, None, K_S, MIN_SEG) is not None
+    assert neighbour_problem(short, 2, "lower", mine, None, MIN_SEG) is not None
     assert neighbour_problem(state(3, 10, 4.4, 6.0, lower=2), 2, "upper",
-                             {9: Claim(2.0, 4.0, 1.0)}, None, K_S, MIN_SEG) is None
+                             {9: Claim(2.0, 4.0, 1.0)}, None, MIN_SEG) is None
     assert neighbour_problem(state(3, 10, 2.4, 6.0, lower=2), 2, "upper",
-                             {9: Claim(2.0, 4.0, 1.0)}, None, K_S, MIN_SEG) is not None
+                             {9: Claim(2.0, 4.0, 1.0)}, None, MIN_SEG) is not None
 
 
 def test_the_tick_window():
