@@ -54,6 +54,9 @@ BACKGROUND_NICE = 10  # the recorder (the team's router) is off the lockstep's p
 STARTUP_S = 60.0
 RECORDER_STALL_S = 30.0  # a recorder that has taken no tick for this long is stopped
 WORLD_DT_S = 0.1  # the world's tick; btrack sim does not change it
+# An agent process's start, spawn to liveliness token: 0.34-0.40 s on this 2-core
+# machine (bench/agent_start.py, BENCHMARKS.md), rounded up.
+BOOT_S = 0.5
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -93,6 +96,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--passes", type=int,
                    help="at least this many passes per sweep of a segment (more on long ones)")
     p.add_argument("--ns", help="run namespace (default: a fresh one per run)")
+    p.add_argument("--boot-s", type=non_negative, default=BOOT_S, metavar="S",
+                   help="simulated seconds a restarted or joining agent takes to start; the "
+                        f"world holds its clock while the process starts ({BOOT_S:g}: "
+                        "measured, bench/agent_start.py)")
     p.add_argument("--port", type=int, metavar="PORT",
                    help="the team's router listens on tcp/127.0.0.1:PORT (default: a free "
                         "port); other tools join the run there (OUT/bus.json says where)")
@@ -380,6 +387,7 @@ def run(args: argparse.Namespace) -> int:
                 print("btrack sim: faults: " + ", ".join(
                     f"{f.kind}:{f.agent}@{f.at_s:g}" for f in schedule))
             world_args = ["world", "--robots", str(bodies), "--team", str(args.robots),
+                          "--boot-s", str(args.boot_s),
                           "--map", args.map,
                           "--scale", str(args.scale), "--start", args.start,
                           "--localization", args.localization, "--duration", str(args.duration),

@@ -106,6 +106,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, default=600.0, help="simulated seconds (600)")
     p.add_argument("--seed", type=int, default=1, help="seed of the map and the noise (1)")
     p.add_argument("--dt", type=float, default=0.1, help="control period, s (0.1)")
+    p.add_argument("--boot-s", type=float, default=0.0, metavar="S",
+                   help="simulated seconds a restarted or joining agent takes to start, as on "
+                        "a robot's computer: the world holds its clock until the new process "
+                        "is alive, then its robot gets no sensing for S (0)")
     p.add_argument(
         "--odom-noise",
         type=float,
@@ -197,6 +201,11 @@ class WorldProcess:
         self.timeouts = 0
         self.holds = sorted(args.hold_at)  # simulated times to hold at, next first
         self.fault_t = -math.inf  # the latest fault the launcher announced
+        # Restarted or joining agents: the simulated time until which each one is still
+        # starting (its robot gets no sensing, nobody waits for its command), and those
+        # whose process the clock holds for until its token is up.
+        self.booting: dict[int, float] = {}
+        self.awaited: set[int] = set()
         self.stopping = False
         self.edge_lo, self.edge_hi = world.map.edge_lo, world.map.edge_hi
         self.pose_source = args.localization
@@ -261,6 +270,7 @@ class WorldProcess:
                 if value:
                     self.live.add(robot)
                     self.mute.add(robot)  # until its first command
+                    self.awaited.discard(robot)
                 else:
                     self.live.discard(robot)
                     self.mute.discard(robot)
@@ -277,9 +287,15 @@ class WorldProcess:
             log.info("localizer %s", "alive" if value else "gone")
         elif kind == _FAULT:
             try:
-                self.fault_t = max(self.fault_t, decode(Fault, value).t)
+                fault = decode(Fault, value)
             except DecodeError as exc:
                 log.warning("dropped a fault announcement: %s", exc)
+                return None
+            self.fault_t = max(self.fault_t, fault.t)
+            if fault.kind in ("restart", "join") and 0 <= fault.agent < self.n:
+                self.booting[fault.agent] = fault.t + self.args.boot_s
+                if fault.agent not in self.live:
+                    self.awaited.add(fault.agent)
         return None
 
     def _drop(self, key: str, why: str) -> None:
@@ -315,7 +331,12 @@ class WorldProcess:
             ranges = self.laser.scan([(x, y) for x, y, _ in truth])
             self.pub_scan.put(encode(Scan(t, k, ranges, s.x, s.y, s.theta, s.angle_min,
                                           s.angle_step, s.range_max)))
+        for i, until in list(self.booting.items()):
+            if t >= until - 1e-9:
+                del self.booting[i]
         for i in range(self.n):
+            if i in self.booting:
+                continue  # still starting: no sensing yet
             r = world.sense(i)
             if self.laser is None:  # the pose travels in the Sense
                 pose = list(world.odometry_pose(i) if odometry else truth[i])
@@ -363,7 +384,7 @@ class WorldProcess:
             if k and k % INFO_EVERY_TICKS == 0:
                 self.publish_info()
             self.publish_sensing(k, t)
-            pending = self.live - self.silent
+            pending = self.live - self.silent - set(self.booting)
             cmds: dict[int, tuple[float, float]] = {}
             began = time.monotonic()
             deadline = began + timeout
@@ -409,10 +430,16 @@ class WorldProcess:
             return
         self.holds = self.holds[len(due):]
         deadline = time.monotonic() + self.args.hold_timeout
-        while self.fault_t < due[-1] and not self.stopping:
+        # until the fault is announced and every agent it started is alive: a process
+        # takes a second or two of wall time to start, which must not be simulated time
+        while (self.fault_t < due[-1] or self.awaited) and not self.stopping:
             remaining = deadline - time.monotonic()
             if remaining <= 0:
-                log.warning("t = %.1f s: no fault announced for %g s; going on", t, due[-1])
+                what = ("no fault announced" if self.fault_t < due[-1] else
+                        f"agents {sorted(self.awaited)} not alive")
+                log.warning("t = %.1f s: %s after %g s; going on", t, what,
+                            self.args.hold_timeout)
+                self.awaited.clear()
                 return
             try:
                 self._handle(self.events.get(timeout=remaining))
@@ -481,6 +508,8 @@ def _check_args(args: argparse.Namespace) -> str | None:
         return "--team must be between 1 and --robots"
     if not args.dt > 0 or not args.duration > 0:
         return "--dt and --duration must be positive"
+    if not (math.isfinite(args.boot_s) and args.boot_s >= 0):
+        return "--boot-s must be >= 0"
     turn_noise = args.odom_noise if args.odom_turn_noise is None else args.odom_turn_noise
     if min(args.odom_noise, turn_noise, args.cmd_timeout, args.startup_timeout, args.settle,
            args.hold_timeout) < 0:

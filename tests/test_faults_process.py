@@ -131,3 +131,11 @@ def test_chaos_with_a_fourth_robot_joining_keeps_the_edge_covered(tmp_path):
             assert (st.lower[j], st.upper[j]) != (-1, -1), (rid, claim)
             assert st.hi[j] - st.lo[j] <= 0.5 * edge + 1e-9, (rid, claim)
     assert run.states[3].hi[-1] - run.states[3].lo[-1] > 0.5  # the newcomer has work
+    # issue 19, item 7: a (re)started agent's process start costs the simulated time it
+    # would on a robot (--boot-s, 0.5 s), not the simulator's speed times the wall time
+    # it takes (50-100 s before the world held its clock for it)
+    for f in run.faults:
+        if f["kind"] in ("restart", "join"):
+            st = run.states[f["agent"]]
+            first = float(st.t[st.t > f["t"]][0])
+            assert 0.5 - 1e-6 <= first - f["t"] <= 1.5, (f, first)
