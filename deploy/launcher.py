@@ -73,9 +73,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scale", type=float, default=0.05, help="PNG map metres per pixel")
     p.add_argument("--start", default="ahead:1",
                    help="in-phase | ahead:K (robot K starts 72 deg ahead; default ahead:1)")
-    p.add_argument("--localization", choices=["pf", "truth", "odometry"], default="pf",
+    p.add_argument("--localization", choices=["pf", "truth", "odometry"],
                    help="where agents' poses come from: pf (the localizer's particle "
-                   "filters on laser scans), truth or odometry (default pf)")
+                   "filters on laser scans), truth or odometry (default pf; with --hil, "
+                   "truth: the hardware loop's world sends the poses)")
     p.add_argument("--odom-noise", type=non_negative, metavar="F",
                    help="wheel odometry noise: std of each step's distance as a fraction "
                    "of it (the world's default, 0.02)")
@@ -264,6 +265,31 @@ def _fail(group: ProcessGroup, child: Child, what: str) -> int:
     return 1
 
 
+# What the hardware loop (--hil) does not do yet: refused by name there, never ignored.
+HIL_REFUSED = (("fault", "--fault"), ("chaos", "--chaos"), ("kidnap", "--kidnap"),
+               ("odom_noise", "--odom-noise"), ("odom_turn_noise", "--odom-turn-noise"),
+               ("progress_every", "--progress-every"))
+
+
+def hil_refusal(args: argparse.Namespace) -> str | None:
+    """Why an option cannot go with --hil (or --hil-faults without it); None if none.
+    The hardware loop runs on the wall clock with its own devices' odometry and the
+    poses its world sends: faults, kidnaps, odometry noise and the particle filter are
+    the simulator's."""
+    if not args.hil:
+        return "--hil-faults needs --hil" if args.hil_faults is not None else None
+    defaults = build_parser().parse_args([])
+    given = [flag for name, flag in HIL_REFUSED if getattr(args, name) != getattr(defaults, name)]
+    if args.localization not in (None, "truth"):
+        given.append(f"--localization {args.localization}")
+    if args.boot_s != defaults.boot_s:
+        given.append("--boot-s")
+    if given:
+        return (f"{', '.join(given)}: not with --hil (the hardware loop runs its own "
+                "devices on the wall clock, on the poses its world sends)")
+    return None
+
+
 def refusal(args: argparse.Namespace, bodies: int) -> str | None:
     """Why the run cannot go as asked, before any process starts; None if it can.
     ``bodies`` is the team plus every id that joins."""
@@ -319,7 +345,9 @@ def run(args: argparse.Namespace) -> int:
     except faults.FaultSpecError as exc:
         print(f"btrack sim: {exc}", file=sys.stderr)
         return 2
-    why = refusal(args, bodies)
+    why = hil_refusal(args) or refusal(args, bodies)
+    if args.localization is None:
+        args.localization = "truth" if args.hil else "pf"
     if why is None and not args.hil:
         late = [f for f in schedule if f.at_s >= args.duration]
         if late:

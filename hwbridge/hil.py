@@ -110,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
     devices = out / "dev"
     ns = args.ns or f"btrack/hil-{os.getpid()}-{int(time.time() * 1000) % 10**9}"
     keys = Keys(ns)
-    port = free_port()
+    port = args.port if getattr(args, "port", None) is not None else free_port()
     hub = SessionOptions(ns=ns, mode="peer", listen=(f"tcp/127.0.0.1:{port}",), multicast=False)
     member = SessionOptions(ns=ns, mode="peer", connect=(f"tcp/127.0.0.1:{port}",),
                             listen=("tcp/127.0.0.1:0",), multicast=False).to_args()

@@ -59,6 +59,27 @@ def test_sim_refuses_by_name_before_starting_anything(tmp_path, capsys, argv, ex
     assert expected in _refused(tmp_path, capsys, *argv)
 
 
+@pytest.mark.parametrize(("argv", "expected"), [
+    (["--hil", "--fault", "kill:1@3"], "--fault: not with --hil"),
+    (["--hil", "--chaos", "3"], "--chaos: not with --hil"),
+    (["--hil", "--kidnap", "1@2:0.1,0"], "--kidnap: not with --hil"),
+    (["--hil", "--odom-noise", "0.1"], "--odom-noise: not with --hil"),
+    (["--hil", "--localization", "pf"], "--localization pf: not with --hil"),
+    (["--hil", "--boot-s", "2"], "--boot-s: not with --hil"),
+    (["--hil-faults", "0.1"], "--hil-faults needs --hil"),
+])
+def test_options_the_hardware_loop_would_ignore_are_refused_by_name(tmp_path, capsys, argv,
+                                                                    expected):
+    """Issue 22, item 2: --hil ran the hardware stack and ignored these silently."""
+    out = tmp_path / "run"
+    code = launcher.main(["--out", str(out), "--duration", "5", "--quiet", "--no-report",
+                          *argv])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert expected in err
+    assert not (out / "logs").exists()
+
+
 def test_sim_refuses_an_output_directory_it_cannot_write(tmp_path, capsys):
     blocker = tmp_path / "a-file"
     blocker.write_text("")
