@@ -159,3 +159,36 @@ def test_eq_3_1_over_arrays_is_the_agents_eq_3_1(frac, length, direction):
     want = position_to_phase(x, lo, lo + length, direction)
     assert float(position_to_phase_array(x, lo, lo + length, direction)) == pytest.approx(
         want, abs=1e-12)
+
+
+def test_a_boundary_move_leaves_the_controllers_desired_phase_alone():
+    """Issue 22, item 7: eq. 4.5 with 4.7 cancels the phase jump of eq. 4.8 in the running
+    controller, not only in the function. Two robots, alike but for their upper
+    neighbour's workload: one's boundary moves, the other's does not. Their position
+    phases then differ by exactly the jump of eq. 4.8, and their desired phases not at
+    all."""
+    from agent.controller import Controller, Gains, Neighbour, RobotLimits
+    from agent.patrol import PatrolConfig
+
+    # a fixed cycle: the rate the team agrees on depends on the segments, which differ here
+    gains, cfg, lim = Gains(k_phi=0.3, cycle_s=200.0), PatrolConfig(), RobotLimits()
+    x, y = 1.3, -0.4  # below the ice, between passes
+    robots = [Controller(0, 0.0, 2.0, 0.0, 6.0, x, gains, cfg, lim) for _ in range(2)]
+    first = [c.step(0.1, x, y, math.pi / 2, False, False, None, None, False, True)
+             for c in robots]
+    assert first[0] == first[1]
+    me = robots[0].published
+    assert me is not None
+
+    def upper(workload: float) -> Neighbour:  # in phase with us: no consensus pull
+        return Neighbour(1, 2.0, 4.0, me.phase_des, workload, me.turns)
+
+    moved = robots[0].step(0.1, x, y, math.pi / 2, False, False, None, upper(me.workload + 2.0),
+                           False, True)
+    still = robots[1].step(0.1, x, y, math.pi / 2, False, False, None, upper(me.workload),
+                           False, True)
+    assert moved.hi > still.hi + 0.1  # the busier neighbour gave up some of its segment
+    jump = boundary_phase_shift(x, still.direction, (still.lo, still.hi), (moved.lo, moved.hi))
+    assert abs(jump) > 0.01
+    assert wrap_pi(moved.phase - still.phase) == pytest.approx(jump, abs=1e-12)
+    assert moved.phase_des == pytest.approx(still.phase_des, abs=1e-12)
