@@ -39,7 +39,7 @@ def main() -> int:
         for i in ids:  # the claimed robot's first, the own last
             cmd = Cmd(t=k * 0.1, k=k, robot=i, v=0.5, omega=1.0)
             state = AgentState(t=k * 0.1, k=k, robot=i, lo=0.0, hi=6.0, phase=0.0,
-                               phase_des=0.0, workload=1.0, depth_avg=0.3, direction=1,
+                               phase_des=0.0, workload=1.8, depth_avg=0.3, direction=1,
                                lower=-1, upper=-1, edge_lo=0.0, edge_hi=6.0, dropped=0)
             pubs[i][0].put(encode(cmd))
             pubs[i][1].put(encode(state))
