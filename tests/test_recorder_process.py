@@ -225,3 +225,30 @@ def test_a_sigkilled_recorders_file_is_reported_as_cut_short(tmp_path: Path) -> 
         assert "**This recording is incomplete**" in (tmp_path / "report.md").read_text()
     finally:
         end(proc)
+
+
+def test_the_launcher_says_what_a_recording_lacks(tmp_path: Path) -> None:
+    """Issue 19, item 2: a recorder stopped before the run's last tick left the launcher
+    exiting 0. What it checks now, on a real recorder's own count: the ticks it holds of
+    the run's, and whether the final one is among them."""
+    from deploy.launcher import _recording_missing
+    from deploy.procs import ProcessGroup
+
+    ns, port = unique_ns(), free_port()
+    keys = Keys(ns)
+    group = ProcessGroup(tmp_path / "logs")
+    try:
+        recorder = group.start("recorder", ["record", "--out", str(tmp_path), "--ns", ns,
+                                            "--no-multicast", "--listen",
+                                            f"tcp/127.0.0.1:{port}"])
+        with bus_session(ns, port) as session:
+            wait_recorder_alive(session, keys)
+            for k in range(5):
+                session.put(keys.world_tick(), encode(Tick(k * 0.1, k, [])))
+            ask_progress(session, keys, lambda p: p.k == 4)
+            group.stop(recorder)  # SIGTERM: it finishes its file and gives its count
+        for total in (5, 9):
+            assert _recording_missing(recorder, total) == (
+                f"it holds 5 of the run's {total} ticks, not the final one")
+    finally:
+        group.stop_all()
