@@ -101,11 +101,12 @@ def neighbour_problem(s: AgentState, me: int, side: str, mine: dict[int, Claim],
     the boundary they share must be where the law (``shared_boundary``) can put it from
     that state and one of the listener's recent ones (on the wall clock, or over a slow
     link, the sender may have acted on an older one of ours), or where it was (it had not
-    heard us in time). A sender that names no neighbour on the listener's side owns the
-    edge to its end by the law (it has lost sight of the listener, after a freeze: the
-    two then meet in the middle), and may claim exactly that. Otherwise it may not reach
-    past the middle of the listener's latest segment (a quarter further for a robot just
-    joining, which split from a slightly older one of ours)."""
+    heard us in time). Otherwise a sender may claim exactly the edge's end on the
+    listener's side (what the law gives a robot that lost sight of the listener, after a
+    freeze, and that it keeps until it hears the listener: the two then meet in the
+    middle), and no other point past the middle of the listener's latest segment (a
+    quarter further for a robot just joining, which split from a slightly older one of
+    ours)."""
     ks = [k for k in mine if k <= s.k - 1]
     if not ks:
         return None
@@ -130,10 +131,12 @@ def neighbour_problem(s: AgentState, me: int, side: str, mine: dict[int, Claim],
         low, high = spans[-1]
         return (f"the boundary it shares with us is at {shared:.6g} m; from its state of "
                 f"tick {s.k - 1} and ours the law can put it only in [{low:.6g}, {high:.6g}] m")
-    named = s.upper if lower else s.lower
     edge_end = s.edge_hi if lower else s.edge_lo
-    if named == -1 and abs(shared - edge_end) <= TOL_M:
-        return None  # it sees no neighbour on our side: the law gives it the edge's end
+    if abs(shared - edge_end) <= TOL_M:
+        # the edge's end: the law's claim of a robot that saw nobody on our side (it lost
+        # sight of us, after a freeze), kept until it hears us; the two then meet in the
+        # middle. Refusing it left both claiming the whole edge, each refusing the other.
+        return None
     c = mine[max(ks)]
     reach = 0.5 * (c.hi - c.lo) * (1.5 if names_me else 1.0)
     past = shared - (c.lo + reach) if lower else (c.hi - reach) - shared

@@ -20,8 +20,8 @@ from report.load import load_run
 from report.summary import compute_summary
 from tests.procutil import end, end_children_of_run, run_sim, unique_ns
 
-DURATION = ["--localization", "truth", "--duration", "60", "--seed", "3", "--robots", "3"]
-LIE_AT = 200  # the world's tick the forger lies at
+DURATION = ["--localization", "truth", "--duration", "40", "--seed", "3", "--robots", "3"]
+LIE_AT = 150  # the world's tick the forger lies at
 
 
 def _wait_port(port: int, timeout_s: float = 60.0) -> None:
@@ -68,7 +68,7 @@ def test_the_run_is_recorded_whole_and_the_lies_are_counted(runs):
     assert code == 0, stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["recording_complete"] is True
-    assert summary["ticks"] == summary["ticks_expected"] == 600
+    assert summary["ticks"] == summary["ticks_expected"] == 400
     refused = summary["refused"]
     # the recorder: the forged tick, the state from the far future and the one deeper
     # than any patrol, and the token of a robot the world does not have
@@ -99,6 +99,6 @@ def test_the_team_does_as_well_as_without_the_lies(runs):
     ra, rb = load_run(clean), load_run(out)
     for robot in (0, 1, 2):
         n = min(ra.states[robot].t.size, rb.states[robot].t.size)
-        assert n >= 590
+        assert n >= 390
         assert abs(ra.states[robot].lo[:n] - rb.states[robot].lo[:n]).max() < 1e-9
         assert abs(ra.states[robot].hi[:n] - rb.states[robot].hi[:n]).max() < 1e-9

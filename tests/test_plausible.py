@@ -108,6 +108,10 @@ def test_a_claim_past_the_middle_of_our_segment_is_refused_without_history():
     assert neighbour_problem(alone, 2, "lower", mine, None, MIN_SEG) is None
     short = state(1, 10, 0.0, 5.9, upper=-1)
     assert neighbour_problem(short, 2, "lower", mine, None, MIN_SEG) is not None
+    # once it sees us again it keeps that end until it hears us: refused, each of two
+    # thawed robots claiming the whole edge refused the other's states for 22 ticks
+    kept = state(1, 11, 0.0, 6.0, upper=2)
+    assert neighbour_problem(kept, 2, "lower", mine, None, MIN_SEG) is None
     assert neighbour_problem(state(3, 10, 4.4, 6.0, lower=2), 2, "upper",
                              {9: Claim(2.0, 4.0, 1.0)}, None, MIN_SEG) is None
     assert neighbour_problem(state(3, 10, 2.4, 6.0, lower=2), 2, "upper",
