@@ -5,8 +5,10 @@ along the patrol (eq. 4.10 made to step one pass at a time)."""
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
-import numpy as np
+if TYPE_CHECKING:  # the array twins import numpy when called: an agent never needs it
+    import numpy as np
 
 TWO_PI = 2.0 * math.pi
 
@@ -44,12 +46,16 @@ def position_to_phase(s_rob: float, lo: float, hi: float, direction: int) -> flo
 
 def wrap_pi_array(angle: np.ndarray | float) -> np.ndarray:
     """``wrap_pi`` over an array (the report's and the localizer's): (-pi, pi]."""
+    import numpy as np
+
     a = np.asarray(angle, dtype=float)
     return a - TWO_PI * np.ceil((a - math.pi) / TWO_PI)
 
 
 def wrap_2pi_array(angle: np.ndarray | float) -> np.ndarray:
     """``wrap_2pi`` over an array: [0, 2 pi)."""
+    import numpy as np
+
     a = np.mod(np.asarray(angle, dtype=float), TWO_PI)
     return np.where(a >= TWO_PI, 0.0, a)
 
@@ -62,6 +68,8 @@ def position_to_phase_array(
 ) -> np.ndarray:
     """``position_to_phase`` (eq. 3.1) over arrays, for the report: x clipped into
     [lo, hi], towards hi while direction >= 0, result in [0, 2 pi)."""
+    import numpy as np
+
     x, lo, hi, direction = (np.asarray(v, dtype=float) for v in (x, lo, hi, direction))
     width = hi - lo
     xc = np.clip(x, lo, hi)

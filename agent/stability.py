@@ -10,11 +10,15 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
-import numpy as np
+if TYPE_CHECKING:  # the matrices import numpy when built: an agent's check needs none
+    import numpy as np
 
 
 def path_laplacian(n: int) -> np.ndarray:
+    import numpy as np
+
     if n < 1:
         raise ValueError("a chain needs at least one robot")
     lap = np.zeros((n, n))
@@ -34,6 +38,8 @@ def phase_gain_bound(n: int) -> float:
 
 def workload_matrix(depths: Sequence[float]) -> np.ndarray:
     """M of e_Psi(t+1) = (I - K_s M) e_Psi(t) for average depths d_0..d_{n-1}."""
+    import numpy as np
+
     d = list(depths)
     m = len(d) - 1
     mat = np.zeros((m, m))
@@ -48,6 +54,8 @@ def workload_matrix(depths: Sequence[float]) -> np.ndarray:
 
 def workload_gain_bound(depths: Sequence[float]) -> float:
     """Largest stable K_s (exclusive) for these depths (thesis eq. 4.4)."""
+    import numpy as np
+
     if len(depths) < 2:
         return math.inf
     lam = float(np.max(np.real(np.linalg.eigvals(workload_matrix(depths)))))
