@@ -41,10 +41,19 @@ def shared_boundary(
     result without a further exchange. Where their views of the boundary differ (a
     robot between them left), they meet in the middle of the gap.
     """
-    ref = 0.5 * (lower.hi + upper.lo)
+    ref, down_room, up_room = _rooms(lower, upper, min_len)
     move = k_s * (upper.workload - lower.workload)
-    low, high = boundary_reach(lower, upper, min_len)
-    return min(max(ref + move, low), high)
+    return ref + min(max(move, -down_room), up_room)
+
+
+def _rooms(lower: SegmentView, upper: SegmentView, min_len: float
+           ) -> tuple[float, float, float]:
+    """The middle of two neighbours' views of their boundary, and how far it may move
+    down and up: half the slack of the segment on that side."""
+    ref = 0.5 * (lower.hi + upper.lo)
+    down_room = max(0.0, 0.5 * (ref - lower.lo - min_len))
+    up_room = max(0.0, 0.5 * (upper.hi - ref - min_len))
+    return ref, down_room, up_room
 
 
 def boundary_reach(lower: SegmentView, upper: SegmentView, min_len: float
@@ -52,9 +61,7 @@ def boundary_reach(lower: SegmentView, upper: SegmentView, min_len: float
     """Where ``shared_boundary`` can put the boundary of two neighbours, whatever their
     workloads: from the middle of their two views of it, at most half the slack of
     either segment beside it (so neither gets shorter than ``min_len``)."""
-    ref = 0.5 * (lower.hi + upper.lo)
-    down_room = max(0.0, 0.5 * (ref - lower.lo - min_len))
-    up_room = max(0.0, 0.5 * (upper.hi - ref - min_len))
+    ref, down_room, up_room = _rooms(lower, upper, min_len)
     return ref - down_room, ref + up_room
 
 
