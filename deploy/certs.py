@@ -1,9 +1,11 @@
 """A certificate authority and the certificates a fleet needs, made with the
 ``openssl`` command (``btrack deploy certs``; the tests use it in a temp dir).
 
-The base station's certificate (common name ``btrack-base``) names its host, its
-address and localhost, since robots check the router's name; robot i's
-(``btrack-robot-I``) is what the router's access control tells robots apart by.
+The router's certificate (common name ``btrack-base``) names the base station's
+host, its address and localhost, since clients check the router's name; each base
+station process has its own (``btrack-world``, ``btrack-laser``, ``btrack-localizer``,
+``btrack-recorder``) and robot i its (``btrack-robot-I``): the common name is what the
+router's access control grants rights to.
 Good enough for a lab and for tests; a site with its own PKI issues the same
 names from it instead.
 """
@@ -98,6 +100,10 @@ def make_fleet_certs(fleet: Fleet, out: Path, flat: bool = False) -> list[Path]:
     names = tuple(n for n in (fleet.base.host, fleet.base.address, "localhost", "127.0.0.1") if n)
     make_cert(ca, d / tls.base_cert, d / tls.base_key, Fleet.common_name(None), names)
     written += [d / tls.ca, d / tls.base_cert, d / tls.base_key]
+    for role in fleet.base_roles:  # a client certificate each: its name is its rights
+        pem, key = tls.role_files(role)
+        make_cert(ca, d / pem, d / key, Fleet.common_name(role))
+        written += [d / pem, d / key]
     for r in fleet.robots:
         d = host_dir(r.host)
         make_cert(ca, d / r.cert, d / r.key, Fleet.common_name(r.id), (r.host,))

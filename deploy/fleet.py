@@ -56,9 +56,14 @@ class Tls:
     enabled: bool = True
     dir: str = "/etc/btrack/tls"  # where certificates live on every host
     ca: str = "ca.pem"
-    base_cert: str = "base.pem"
+    base_cert: str = "base.pem"  # the router's (it listens with it)
     base_key: str = "base.key"
     access_control: bool = True  # a robot may publish only its own keys
+
+    @staticmethod
+    def role_files(role: str) -> tuple[str, str]:
+        """Certificate and key file of a base station process (``Fleet.base_roles``)."""
+        return f"{role}.pem", f"{role}.key"
 
 
 @dataclass(frozen=True)
@@ -91,10 +96,22 @@ class Fleet:
             host = f"[{host}]"
         return f"{proto}/{host}:{self.base.port}"
 
+    @property
+    def base_roles(self) -> tuple[str, ...]:
+        """The base station's processes that join the bus, each with a certificate and
+        rights of its own: ``world`` (the simulator), ``laser`` (the LMS bridge, with
+        hardware), ``localizer``, ``recorder``."""
+        world = {"sim": ("world",), "hardware": ("laser",)}.get(self.base.world, ())
+        return (*world, *(("localizer",) if self.base.localizer else ()),
+                *(("recorder",) if self.base.recorder else ()))
+
     @staticmethod
-    def common_name(rid: int | None) -> str:
-        """The certificate common name of robot ``rid`` (None: the base station)."""
-        return "btrack-base" if rid is None else f"btrack-robot-{rid}"
+    def common_name(who: int | str | None) -> str:
+        """The certificate common name of robot ``who`` (an id), of a base station
+        process (a role of ``base_roles``), or (None) of the router."""
+        if who is None:
+            return "btrack-base"
+        return f"btrack-robot-{who}" if isinstance(who, int) else f"btrack-{who}"
 
 
 # --- loading ---------------------------------------------------------------------------

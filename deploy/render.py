@@ -89,58 +89,93 @@ def _tls_paths(fleet: Fleet, cert: str, key: str) -> dict[str, str]:
             "key": f"{d}/{key}"}
 
 
-def robot_rules(ns: str, rid: int) -> list[dict[str, Any]]:
-    """Access-control rules for robot ``rid``: it may put only its own command and
-    state, hold only its own liveliness token, and subscribe to what its agent
-    needs; it hears its own sensing and pose and the team's states and tokens."""
-    me = f"robot{rid}"
-    return [
-        {"id": f"{me}-put", "permission": "allow", "flows": ["ingress"],
-         "messages": ["put"], "key_exprs": [f"{ns}/robot/{rid}/cmd", f"{ns}/agent/{rid}/state"]},
-        {"id": f"{me}-token", "permission": "allow", "flows": ["ingress"],
-         "messages": ["liveliness_token"], "key_exprs": [f"{ns}/alive/agent/{rid}"]},
-        {"id": f"{me}-subscribe", "permission": "allow", "flows": ["ingress"],
-         "messages": ["declare_subscriber"],
-         "key_exprs": [f"{ns}/robot/{rid}/sense", f"{ns}/robot/{rid}/pose",
-                       f"{ns}/agent/*/state"]},
-        {"id": f"{me}-watch", "permission": "allow", "flows": ["ingress"],
-         "messages": ["declare_liveliness_subscriber", "liveliness_query"],
-         "key_exprs": [f"{ns}/alive/agent/*"]},
-        {"id": f"{me}-members", "permission": "allow", "flows": ["egress"],
-         "messages": ["liveliness_token", "reply"], "key_exprs": [f"{ns}/alive/agent/*"]},
-        {"id": f"{me}-hear", "permission": "allow", "flows": ["egress"],
-         "messages": ["put"],
-         "key_exprs": [f"{ns}/robot/{rid}/sense", f"{ns}/robot/{rid}/pose",
-                       f"{ns}/agent/*/state"]},
-        # A client sends a put only where it knows of a subscriber: it must be told of
-        # the base station's (wildcard) subscriptions. Declarations carry no data.
-        {"id": f"{me}-subscribers", "permission": "allow", "flows": ["egress"],
-         "messages": ["declare_subscriber"], "key_exprs": [f"{ns}/**"]},
-    ]
+def _rule(rid: str, flow: str, messages: list[str], keys: list[str]) -> dict[str, Any]:
+    return {"id": rid, "permission": "allow", "flows": [flow], "messages": messages,
+            "key_exprs": keys}
+
+
+def _puts(me: str, ns: str, keys: list[str]) -> list[dict[str, Any]]:
+    """``me`` may put on ``keys``. A client sends a put only where it knows of a
+    subscriber, so it is also told of every subscription (declarations carry no data)."""
+    return [_rule(f"{me}-put", "ingress", ["put"], keys),
+            _rule(f"{me}-subscribers", "egress", ["declare_subscriber"], [f"{ns}/**"])]
+
+
+def _hears(me: str, keys: list[str]) -> list[dict[str, Any]]:
+    """``me`` may subscribe to ``keys`` and is sent what is put there."""
+    return [_rule(f"{me}-subscribe", "ingress", ["declare_subscriber"], keys),
+            _rule(f"{me}-hear", "egress", ["put"], keys)]
+
+
+def _watches(me: str, keys: list[str]) -> list[dict[str, Any]]:
+    """``me`` may follow the liveliness tokens on ``keys``, those already up included."""
+    return [_rule(f"{me}-watch", "ingress",
+                  ["declare_liveliness_subscriber", "liveliness_query"], keys),
+            _rule(f"{me}-members", "egress", ["liveliness_token", "reply"], keys)]
+
+
+def robot_rules(ns: str, rid: int, bridge: bool = False) -> list[dict[str, Any]]:
+    """Access-control rules for robot ``rid``'s certificate: it may put only its own
+    command and state, hold only its own liveliness token, and hear only its own
+    sensing and pose and the team's states and tokens. With ``bridge`` (hardware) its
+    Create's bridge also runs on its computer, with the same certificate: it may then
+    also put its own sensing and hear its own command."""
+    me, mine = f"robot{rid}", f"{ns}/robot/{rid}"
+    put = [f"{mine}/cmd", f"{ns}/agent/{rid}/state"] + ([f"{mine}/sense"] if bridge else [])
+    hear = [f"{mine}/sense", f"{mine}/pose", f"{ns}/agent/*/state"] + (
+        [f"{mine}/cmd"] if bridge else [])
+    return [*_puts(me, ns, put),
+            _rule(f"{me}-token", "ingress", ["liveliness_token"], [f"{ns}/alive/agent/{rid}"]),
+            *_hears(me, hear), *_watches(me, [f"{ns}/alive/agent/*"])]
+
+
+def role_rules(ns: str, role: str) -> list[dict[str, Any]]:
+    """Access-control rules for a base station process (``Fleet.base_roles``): what it
+    puts, hears, watches and answers, and nothing else."""
+    alive_all = [f"{ns}/alive/agent/*", f"{ns}/alive/recorder", f"{ns}/alive/localizer"]
+    if role == "world":  # the simulator: every robot's sensing, the scan, the clock
+        return [*_puts(role, ns, [f"{ns}/robot/*/sense", f"{ns}/laser/scan",
+                                  f"{ns}/world/truth", f"{ns}/world/tick",
+                                  f"{ns}/world/info"]),
+                *_hears(role, [f"{ns}/robot/*/cmd"]), *_watches(role, alive_all)]
+    if role == "laser":  # the LMS bridge: scans only
+        return _puts(role, ns, [f"{ns}/laser/scan"])
+    if role == "localizer":  # scans and odometry in, poses out
+        return [*_puts(role, ns, [f"{ns}/robot/*/pose"]),
+                *_hears(role, [f"{ns}/laser/scan", f"{ns}/robot/*/sense"]),
+                _rule(f"{role}-token", "ingress", ["liveliness_token"],
+                      [f"{ns}/alive/localizer"])]
+    if role == "recorder":  # hears everything, puts nothing, answers for its progress
+        progress = [f"{ns}/recorder/progress"]
+        return [*_hears(role, [f"{ns}/**"]), *_watches(role, [f"{ns}/alive/agent/*"]),
+                _rule(f"{role}-token", "ingress", ["liveliness_token"],
+                      [f"{ns}/alive/recorder"]),
+                _rule(f"{role}-progress", "ingress", ["declare_queryable", "reply"], progress),
+                _rule(f"{role}-asked", "egress", ["query"], progress)]
+    raise ValueError(f"no such base station process: {role!r}")
 
 
 def access_control(fleet: Fleet) -> dict[str, Any]:
-    """The router's ``access_control`` section: the base station (its certificate)
-    may do anything in the namespace, robot i only what ``robot_rules`` allow; every
-    other message is denied."""
+    """The router's ``access_control`` section: each base station process (its own
+    certificate) may do what ``role_rules`` allow, robot i what ``robot_rules`` allow;
+    every other message is denied. No certificate has every right, the router's own
+    (which it only listens with) none."""
     ns = fleet.namespace
-    rules: list[dict[str, Any]] = [
-        {"id": "base-all", "permission": "allow", "flows": ["ingress", "egress"],
-         "messages": ["put", "delete", "declare_subscriber", "query", "declare_queryable",
-                      "reply", "liveliness_token", "declare_liveliness_subscriber",
-                      "liveliness_query"],
-         "key_exprs": [f"{ns}/**"]},
-    ]
-    subjects: list[dict[str, Any]] = [
-        {"id": "base", "cert_common_names": [Fleet.common_name(None)]}]
-    policies: list[dict[str, Any]] = [{"id": "base", "rules": ["base-all"],
-                                       "subjects": ["base"]}]
+    rules: list[dict[str, Any]] = []
+    subjects: list[dict[str, Any]] = []
+    policies: list[dict[str, Any]] = []
+
+    def grant(subject: str, name: str, mine: list[dict[str, Any]]) -> None:
+        rules.extend(mine)
+        subjects.append({"id": subject, "cert_common_names": [name]})
+        policies.append({"id": subject, "rules": [x["id"] for x in mine],
+                         "subjects": [subject]})
+
+    for role in fleet.base_roles:
+        grant(role, Fleet.common_name(role), role_rules(ns, role))
     for r in fleet.robots:
-        mine = robot_rules(ns, r.id)
-        rules += mine
-        subjects.append({"id": f"robot{r.id}", "cert_common_names": [Fleet.common_name(r.id)]})
-        policies.append({"id": f"robot{r.id}", "rules": [x["id"] for x in mine],
-                         "subjects": [f"robot{r.id}"]})
+        grant(f"robot{r.id}", Fleet.common_name(r.id),
+              robot_rules(ns, r.id, bridge=fleet.base.world == "hardware"))
     return {"enabled": True, "default_permission": "deny", "rules": rules,
             "subjects": subjects, "policies": policies}
 
@@ -165,10 +200,15 @@ def router_config(fleet: Fleet, listen_host: str = "0.0.0.0") -> dict[str, Any]:
     return conf
 
 
-def client_config(fleet: Fleet, robot: Robot | None, host: str | None = None) -> dict[str, Any]:
-    """A client of the router: a robot's agent, or (robot None) a base-station process
-    on the router's own host."""
+def client_config(fleet: Fleet, who: Robot | str, host: str | None = None) -> dict[str, Any]:
+    """A client of the router: a robot's agent (and, with hardware, its Create's
+    bridge), or a base station process on the router's own host (a role of
+    ``Fleet.base_roles``), each with its own certificate."""
     proto = "tls" if fleet.tls.enabled else "tcp"
+    robot = who if isinstance(who, Robot) else None
+    if robot is None and who not in fleet.base_roles:
+        raise ValueError(f"{who!r} is no process of this fleet's base station "
+                         f"({', '.join(fleet.base_roles)})")
     if host is None:
         host = fleet.base.host if robot is not None else "localhost"
     lease = fleet.lease_s if robot is not None else fleet.base.lease_s
@@ -181,7 +221,7 @@ def client_config(fleet: Fleet, robot: Robot | None, host: str | None = None) ->
     }
     if fleet.tls.enabled:
         cert, key = ((robot.cert, robot.key) if robot is not None
-                     else (fleet.tls.base_cert, fleet.tls.base_key))
+                     else fleet.tls.role_files(str(who)))
         p = _tls_paths(fleet, cert, key)
         conf["transport"]["link"]["tls"] = {
             "root_ca_certificate": p["root_ca_certificate"],
@@ -208,11 +248,12 @@ def render(fleet: Fleet) -> dict[str, str]:
         f"Zenoh router of the base station {base}, team of {fleet.team}, namespace "
         f"{fleet.namespace}.\nRobots connect with their own certificate; the access control "
         "lets robot i publish only its own keys.", router_config(fleet))
-    files[f"{base}/{cd}/zenoh-base.json5"] = _json5(
-        "Zenoh client configuration of the base station's own processes (world or bridges, "
-        "localizer, recorder).", client_config(fleet, None))
+    for role in fleet.base_roles:
+        files[f"{base}/{cd}/zenoh-{role}.json5"] = _json5(
+            f"Zenoh configuration of the base station's {role}: a client of the router on "
+            f"this host, with its own certificate (common name {Fleet.common_name(role)}), "
+            "which the router's access control knows it by.", client_config(fleet, role))
     files[f"{base}/{cd}/base.env"] = _env({
-        "ZENOH_CONFIG": f"{fleet.config_dir}/zenoh-base.json5",
         "BTRACK_NS": fleet.namespace,
         "BTRACK_ROBOTS": str(fleet.team),
         "BTRACK_WORLD_ARGS": " ".join(b.world_args),

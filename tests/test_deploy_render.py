@@ -39,8 +39,9 @@ def rendered(tmp_path_factory) -> Path:
 def test_every_host_gets_its_files(rendered: Path) -> None:
     assert {p.name for p in rendered.iterdir() if p.is_dir()} == HOSTS
     base = rendered / "base.lab"
-    for rel in ("etc/btrack/zenoh-router.json5", "etc/btrack/zenoh-base.json5",
-                "etc/btrack/base.env", "etc/systemd/system/btrack-router.service",
+    for rel in ("etc/btrack/zenoh-router.json5", "etc/btrack/zenoh-world.json5",
+                "etc/btrack/zenoh-recorder.json5", "etc/btrack/base.env",
+                "etc/systemd/system/btrack-router.service",
                 "etc/systemd/system/btrack-world.service",
                 "etc/systemd/system/btrack-recorder.service"):
         assert (base / rel).is_file(), rel
@@ -62,7 +63,7 @@ def test_every_host_gets_its_files(rendered: Path) -> None:
 
 def test_json5_files_load_in_zenoh(rendered: Path) -> None:
     files = sorted(rendered.rglob("*.json5"))
-    assert len(files) == 5
+    assert len(files) == 6  # the router, the world, the recorder, three robots
     for path in files:
         conf = zenoh.Config.from_file(str(path))
         text = str(conf)
@@ -73,6 +74,12 @@ def test_json5_files_load_in_zenoh(rendered: Path) -> None:
     assert '"default_permission":"deny"' in router.replace(" ", "")
     robot = str(zenoh.Config.from_file(str(rendered / "robot2.lab/etc/btrack/zenoh-agent-2.json5")))
     assert "tls/base.lab:7447" in robot and "/etc/btrack/tls/robot-2.pem" in robot
+    for role in ("world", "recorder"):  # each base station process with its own certificate
+        path = rendered / f"base.lab/etc/btrack/zenoh-{role}.json5"
+        conf = str(zenoh.Config.from_file(str(path)))
+        assert "tls/localhost:7447" in conf and f"/etc/btrack/tls/{role}.pem" in conf
+        unit = (rendered / f"base.lab/etc/systemd/system/btrack-{role}.service").read_text()
+        assert f"--zenoh-config /etc/btrack/zenoh-{role}.json5" in unit
 
 
 @pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="no systemd-analyze here")
@@ -110,6 +117,11 @@ def test_robot_may_publish_only_its_own_keys_in_the_rendered_acl() -> None:
     assert rules["robot1-token"]["key_exprs"] == ["btrack/lab1/alive/agent/1"]
     subjects = {s["id"]: s for s in acl["subjects"]}
     assert subjects["robot1"]["cert_common_names"] == ["btrack-robot-1"]
+    # every base station process has a name of its own; the router's has no rights
+    assert {s["id"]: s["cert_common_names"] for s in acl["subjects"]
+            if not s["id"].startswith("robot")} == {
+        "world": ["btrack-world"], "recorder": ["btrack-recorder"]}
+    assert not [s for s in acl["subjects"] if "btrack-base" in s["cert_common_names"]]
     # no robot rule lets it put or declare a token on a key with a wildcard
     for rule in acl["rules"]:
         if rule["id"].startswith("robot") and "ingress" in rule["flows"]:
@@ -135,6 +147,13 @@ def test_certs_for_the_fleet_chain_to_its_ca(tmp_path: Path) -> None:
     assert res.returncode == 0, res.stderr
     tls = tmp_path / "robot1.lab/etc/btrack/tls"
     assert sorted(p.name for p in tls.iterdir()) == ["ca.pem", "robot-1.key", "robot-1.pem"]
+    base = tmp_path / "base.lab/etc/btrack/tls"
+    assert sorted(p.name for p in base.iterdir()) == [
+        "base.key", "base.pem", "ca.pem", "recorder.key", "recorder.pem", "world.key",
+        "world.pem"]
+    world = subprocess.run(["openssl", "x509", "-noout", "-subject", "-in",
+                            str(base / "world.pem")], capture_output=True, text=True).stdout
+    assert "CN = btrack-world" in world
     assert (tls / "robot-1.key").stat().st_mode & 0o077 == 0
     assert not list(tmp_path.glob("*.lab/**/ca.key"))  # the CA key stays off the hosts
     ok = subprocess.run(["openssl", "verify", "-CAfile", str(tls / "ca.pem"),

@@ -6,6 +6,8 @@ and this test's session as the base station's observer, all on loopback.
   name, plain TCP) cannot join: it fails to open and nothing of it reaches anyone.
 - Robot 2's certificate cannot publish robot 1's command or state, nor hold robot 1's
   liveliness token; the same process's own keys go through (the control).
+- Every base station process has a certificate of its own, and a team (world,
+  localizer, recorder, agents) runs on the rights each is given and no more.
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ pytestmark = pytest.mark.skipif(
 class Bus:
     """The team's setup: certificates, configuration files and the router process."""
 
-    def __init__(self, tmp: Path, acl: bool = True):
+    def __init__(self, tmp: Path, acl: bool = True, robots: int = 3, base: str = ""):
         self.tmp = tmp
         self.ns = unique_ns()
         port = free_port()
@@ -46,9 +48,10 @@ namespace = "{self.ns}"
 host = "localhost"
 address = "127.0.0.1"
 port = {port}
+{base}
 [tls]
 dir = "{tmp / "tls"}"
-{"".join(f'[[robots]]{chr(10)}id = {i}{chr(10)}host = "localhost"{chr(10)}' for i in range(3))}
+{"".join(f'[[robots]]{chr(10)}id = {i}{chr(10)}host = "localhost"{chr(10)}' for i in range(robots))}
 ''')
         make_fleet_certs(self.fleet, tmp / "tls", flat=True)
         conf = router_config(self.fleet, "127.0.0.1")
@@ -90,7 +93,7 @@ class Observer:
         self.tokens: list[str] = []
         self._subs = [
             session.declare_subscriber(f"{ns}/**", self._on_put),
-            session.liveliness().declare_subscriber(f"{ns}/alive/**", self._on_token),
+            session.liveliness().declare_subscriber(f"{ns}/alive/agent/*", self._on_token),
         ]
 
     def _on_put(self, sample: zenoh.Sample) -> None:
@@ -109,7 +112,7 @@ class Observer:
 
 def open_observer(b: Bus) -> tuple[zenoh.Session, Observer]:
     """The base station's session, once the router accepts it."""
-    conf = client_config(b.fleet, None)
+    conf = client_config(b.fleet, "recorder")  # it hears everything, and puts nothing
     opened: list[zenoh.Session] = []
 
     def base_station_joins() -> bool:
@@ -191,3 +194,49 @@ def test_without_access_control_the_same_claim_would_go_through(tmp_path: Path) 
             assert obs.seen(f"{b.ns}/alive/agent/1") == 1
     finally:
         stop(b.proc)
+
+
+def test_a_team_runs_on_the_rights_each_process_is_given(tmp_path: Path) -> None:
+    """World, localizer, recorder and two agents, each with its own certificate and
+    nothing but its own rights: every tick's scan, sensing, poses (the localizer's),
+    states and commands reach the recording."""
+    b = Bus(tmp_path, robots=2, base="localizer = true")
+    fleet, ns = b.fleet, ["--ns", b.ns]
+    procs = []
+    try:
+        def conf(name: str, who) -> str:
+            return str(b.write(name, client_config(fleet, who, host="localhost")))
+
+        procs.append(start(["record", "--out", str(tmp_path / "run"), "--zenoh-config",
+                            conf("recorder", "recorder"), *ns], log=tmp_path / "recorder.log"))
+        procs.append(start(["localizer", "--robots", "2", "--zenoh-config",
+                            conf("localizer", "localizer"), *ns], log=tmp_path / "loc.log"))
+        procs += [start(["agent", "--id", str(i), "--robots", "2", "--zenoh-config",
+                         conf(f"agent{i}", fleet.robot(i)), *ns], log=tmp_path / f"agent{i}.log")
+                  for i in range(2)]
+        world = start(["world", "--robots", "2", "--localization", "pf", "--duration", "3",
+                       "--wait-recorder", "--zenoh-config", conf("world", "world"), *ns],
+                      log=tmp_path / "world.log")
+        procs.append(world)
+        assert world.wait(120) == 0, (tmp_path / "world.log").read_text()[-2000:]
+        assert procs[0].wait(30) == 0, (tmp_path / "recorder.log").read_text()[-2000:]
+    finally:
+        for proc in procs:
+            stop(proc)
+        stop(b.proc)
+    counts = topic_counts(tmp_path / "run" / "run.mcap")
+    ticks = counts["world/tick"]
+    assert ticks == 30, counts
+    for topic in ("laser/scan", "world/truth", "robot/0/sense", "robot/1/sense",
+                  "robot/0/pose", "robot/1/pose", "agent/0/state", "agent/1/state",
+                  "robot/0/cmd", "robot/1/cmd"):
+        assert counts[topic] == ticks, (topic, counts)
+
+
+def topic_counts(path: Path) -> dict[str, int]:
+    from collections import Counter
+
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as f:
+        return Counter(ch.topic for _, ch, _ in make_reader(f).iter_messages())
