@@ -105,6 +105,22 @@ class Fleet:
         return (*world, *(("localizer",) if self.base.localizer else ()),
                 *(("recorder",) if self.base.recorder else ()))
 
+    def tls_files(self, host: str) -> dict[str, bool]:
+        """The files ``host`` needs in the TLS directory, each with whether it is a
+        private key: the CA's certificate, and the certificate and key of every identity
+        that runs there."""
+        t = self.tls
+        pairs = []
+        if host == self.base.host:
+            pairs.append((t.base_cert, t.base_key))
+            pairs += [t.role_files(role) for role in self.base_roles]
+        pairs += [(r.cert, r.key) for r in self.robots if r.host == host]
+        files = {t.ca: False}
+        for cert, key in pairs:
+            files.setdefault(cert, False)
+            files[key] = True
+        return files
+
     @staticmethod
     def common_name(who: int | str | None) -> str:
         """The certificate common name of robot ``who`` (an id), of a base station
