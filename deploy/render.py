@@ -247,6 +247,13 @@ def _env(values: dict[str, str]) -> str:
     return "\n".join(out) + "\n"
 
 
+def robot_units(fleet: Fleet) -> list[str]:
+    """The unit templates of a robot computer: its agent, and with hardware its Create's
+    bridge (both instantiated with the robot id)."""
+    return ["btrack-agent@.service"] + (
+        ["btrack-bridge@.service"] if fleet.base.world == "hardware" else [])
+
+
 def render(fleet: Fleet) -> dict[str, str]:
     """Every file of every host: ``"<host>/<path on that host>" -> text``."""
     files: dict[str, str] = {}
@@ -262,10 +269,13 @@ def render(fleet: Fleet) -> dict[str, str]:
             f"Zenoh configuration of the base station's {role}: a client of the router on "
             f"this host, with its own certificate (common name {Fleet.common_name(role)}), "
             "which the router's access control knows it by.", client_config(fleet, role))
+    hardware = b.world == "hardware"
     files[f"{base}/{cd}/base.env"] = _env({
         "BTRACK_NS": fleet.namespace,
         "BTRACK_ROBOTS": str(fleet.team),
         "BTRACK_WORLD_ARGS": " ".join(b.world_args),
+        **({"BTRACK_LASER_PORT": b.laser_port, "BTRACK_EPOCH": repr(fleet.epoch)}
+           if hardware else {}),
         "BTRACK_LOCALIZER_ARGS": " ".join(b.localizer_args),
         "BTRACK_RECORDER_DIR": b.recorder_dir,
         "PYTHONUNBUFFERED": "1",
@@ -291,10 +301,13 @@ def render(fleet: Fleet) -> dict[str, str]:
             "BTRACK_NS": fleet.namespace,
             "BTRACK_ROBOTS": str(fleet.team),
             "BTRACK_AGENT_ARGS": " ".join((*fleet.agent_args, *r.agent_args)),
+            **({"BTRACK_CREATE_PORT": r.port, "BTRACK_EPOCH": repr(fleet.epoch),
+                "BTRACK_BRIDGE_ARGS": " ".join((*fleet.bridge_args, *r.bridge_args))}
+               if hardware else {}),
             "PYTHONUNBUFFERED": "1",
         })
-        files[f"{r.host}/{UNIT_DIR}/btrack-agent@.service"] = _unit("btrack-agent@.service",
-                                                                     fleet)
+        for name in robot_units(fleet):
+            files[f"{r.host}/{UNIT_DIR}/{name}"] = _unit(name, fleet)
     for host in sorted({base, *(r.host for r in fleet.robots)}):
         mine = [k.split("/", 1)[1] for k in files if k.startswith(host + "/")]
         files[f"{host}/install.sh"] = install_script(fleet, host, mine)
@@ -379,8 +392,9 @@ def install_notes(fleet: Fleet, base_units: list[str]) -> str:
     lines += ["", "Base station:", "", "    systemctl daemon-reload",
               f"    systemctl enable --now {' '.join(base_units)}", ""]
     for r in fleet.robots:
+        mine = " ".join(u.replace("@.service", f"@{r.id}") for u in robot_units(fleet))
         lines.append(f"Robot {r.id} ({r.host}): `systemctl daemon-reload && "
-                     f"systemctl enable --now btrack-agent@{r.id}`")
+                     f"systemctl enable --now {mine}`")
     return "\n".join(lines) + "\n"
 
 

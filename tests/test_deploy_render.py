@@ -87,8 +87,9 @@ def test_units_pass_systemd_analyze_verify(rendered: Path, tmp_path: Path) -> No
     units = sorted((rendered / "base.lab/etc/systemd/system").glob("*.service"))
     # and the units the example leaves out: hardware bridges and the localizer
     fleet = parse(EXAMPLE.read_text())
-    hw = dataclasses.replace(fleet, btrack=str(BTRACK), base=dataclasses.replace(
-        fleet.base, world="hardware", localizer=True))
+    hw = dataclasses.replace(fleet, btrack=str(BTRACK), epoch=1767225600.0,
+                             base=dataclasses.replace(fleet.base, world="hardware",
+                                                      localizer=True))
     hw_units = {k: v for k, v in render(hw).items() if k.endswith((
         "btrack-hwbridge.service", "btrack-localizer.service"))}
     assert len(hw_units) == 2 and "btrack-world.service" not in " ".join(render(hw))
@@ -99,7 +100,11 @@ def test_units_pass_systemd_analyze_verify(rendered: Path, tmp_path: Path) -> No
     agent_dir.mkdir()
     shutil.copy(rendered / "robot1.lab/etc/systemd/system/btrack-agent@.service", agent_dir)
     (agent_dir / "btrack-agent@1.service").symlink_to("btrack-agent@.service")
-    for group in (units, [agent_dir / "btrack-agent@1.service"]):
+    bridge = render(hw)["robot1.lab/etc/systemd/system/btrack-bridge@.service"]
+    (agent_dir / "btrack-bridge@.service").write_text(bridge)
+    (agent_dir / "btrack-bridge@1.service").symlink_to("btrack-bridge@.service")
+    for group in (units, [agent_dir / "btrack-agent@1.service",
+                          agent_dir / "btrack-bridge@1.service"]):
         res = subprocess.run(["systemd-analyze", "verify", *map(str, group)],
                              capture_output=True, text=True, timeout=60)
         # verify returns 0 on unknown keys; they only show as warnings, so none is allowed
@@ -181,6 +186,12 @@ BAD = [
     ('namespace = "a"\n[base\nhost = "b"\n', "not valid TOML"),
     ('namespace = "a b"\n[base]\nhost = "b"\n[[robots]]\nid = 0\nhost = "r"\n',
      ":1: namespace:"),
+    ('namespace = "a"\n[base]\nhost = "b"\nworld = "hardware"\n[[robots]]\nid = 0\n'
+     'host = "r"\n', ':4: base.world: world = "hardware" needs a top-level epoch'),
+    ('namespace = "a"\nepoch = 1\n[base]\nhost = "b"\nworld = "hardware"\nlocalizer = false\n'
+     '[[robots]]\nid = 0\nhost = "r"\n', ':6: base.localizer: world = "hardware" needs the'),
+    ('namespace = "a"\n[base]\nhost = "b"\n[[robots]]\nid = 0\nhost = "r"\nport = "ttyUSB0"\n',
+     ":7: robots[0].port: must be an absolute path"),
 ]
 
 

@@ -26,12 +26,12 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
-import json5
 import pytest
 
 from deploy.certs import make_fleet_certs
 from deploy.fleet import Fleet, parse
 from deploy.render import UNIT_DIR, render, write
+from tests.unitfiles import host_files, reads
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLE = ROOT / "deploy" / "examples" / "fleet.toml"
@@ -45,7 +45,7 @@ def example() -> Fleet:
 
 def hardware() -> Fleet:
     fleet = example()
-    return dataclasses.replace(fleet, base=dataclasses.replace(
+    return dataclasses.replace(fleet, epoch=1767225600.0, base=dataclasses.replace(
         fleet.base, world="hardware", localizer=True))
 
 
@@ -84,7 +84,7 @@ def test_every_rendered_unit_has_an_exposure_of_3_or_lower(tmp_path: Path) -> No
     names = {u.name for u in units}
     assert {"btrack-router.service", "btrack-world.service", "btrack-recorder.service",
             "btrack-localizer.service", "btrack-hwbridge.service",
-            "btrack-agent@1.service"} <= names, names
+            "btrack-agent@1.service", "btrack-bridge@1.service"} <= names, names
     scores = {}
     for unit in units:
         score, text = exposure(unit)
@@ -183,32 +183,15 @@ def read_install(script: str, user: str, group: str) -> dict[str, Installed]:
 
 def unit_needs(files: dict[str, str], fleet: Fleet, host: str) -> dict[str, set[str]]:
     """For every unit of ``host`` (a template once per robot id of the host), the files
-    its process must read: its environment file, its Zenoh configuration (named in
-    ExecStart or in the environment file) and the TLS files that configuration names."""
-    mine = {"/" + k.split("/", 1)[1]: v for k, v in files.items() if k.startswith(host + "/")}
+    its process must read (``unitfiles.reads``)."""
     needs: dict[str, set[str]] = {}
-    for path, text in mine.items():
+    for path in host_files(files, host):
         if not path.startswith(f"/{UNIT_DIR}/"):
             continue
         name = PurePosixPath(path).name
-        ids = ([str(r.id) for r in fleet.robots if r.host == host] if "@." in name else [""])
+        ids = [str(r.id) for r in fleet.robots if r.host == host] if "@." in name else [""]
         for i in ids:
-            body = text.replace("%i", i)
-            env_files = re.findall(r"^EnvironmentFile=(\S+)$", body, re.M)
-            exec_start = re.search(r"^ExecStart=(.*)$", body, re.M)
-            assert exec_start, path
-            env = {}
-            for f in env_files:
-                for ln in mine[f].splitlines():
-                    if "=" in ln and not ln.startswith("#"):
-                        k, v = ln.split("=", 1)
-                        env[k] = v
-            argv = shlex.split(exec_start.group(1))
-            config = (argv[argv.index("--zenoh-config") + 1] if "--zenoh-config" in argv
-                      else env["ZENOH_CONFIG"])
-            tls = json5.loads(mine[config]).get("transport", {}).get("link", {}).get("tls", {})
-            needs[name.replace("@.", f"@{i}.")] = {*env_files, config, *(
-                v for k, v in tls.items() if k.endswith(("certificate", "private_key")))}
+            needs[name.replace("@.", f"@{i}.")] = reads(files, host, name, i)
     return needs
 
 
@@ -253,7 +236,7 @@ def rendered_with_certs(tmp_path_factory) -> tuple[Fleet, dict[str, str], Path]:
     if shutil.which("openssl") is None:
         pytest.skip("no openssl command")
     out = tmp_path_factory.mktemp("tree")
-    fleet = example()
+    fleet = hardware()
     files = render(fleet)
     write(files, out)
     make_fleet_certs(fleet, out)
@@ -264,6 +247,7 @@ def test_install_sh_leaves_every_file_a_unit_reads_readable_by_its_user_only(
         rendered_with_certs) -> None:
     fleet, files, tree = rendered_with_certs
     check_install(files, fleet, tree)
+    check_install(render(example()), example(), None)
 
 
 def test_install_sh_makes_a_recordings_directory_outside_var_lib() -> None:

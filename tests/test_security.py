@@ -8,6 +8,10 @@ and this test's session as the base station's observer, all on loopback.
   liveliness token; the same process's own keys go through (the control).
 - Every base station process has a certificate of its own, and a team (world,
   localizer, recorder, agents) runs on the rights each is given and no more.
+- With hardware, the rendered units' own commands run (router, laser bridge, robot
+  0's Create bridge, against emulated devices on pseudo-terminals): robot 0's
+  certificate puts its robot's sensing and hears its commands, and cannot do either
+  for robot 1.
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ import json
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -23,9 +28,13 @@ import zenoh
 
 from deploy.certs import make_ca, make_cert, make_fleet_certs
 from deploy.fleet import Fleet, parse
-from deploy.render import client_config, router_config
+from deploy.render import client_config, render, router_config
+from hwbridge.create import model as cm
+from hwbridge.emulators.pty import CreateEmulator, LmsEmulator
 from tests.netns import stop
 from tests.procutil import free_port, start, unique_ns, wait_for
+from tests.unitfiles import exec_argv, host_files
+from wire import Cmd, Keys, encode
 
 ROOT = Path(__file__).resolve().parent.parent
 PROBE = ROOT / "tests" / "acl_probe.py"
@@ -197,10 +206,11 @@ def test_without_access_control_the_same_claim_would_go_through(tmp_path: Path) 
 
 
 def test_a_team_runs_on_the_rights_each_process_is_given(tmp_path: Path) -> None:
-    """World, localizer, recorder and two agents, each with its own certificate and
-    nothing but its own rights: every tick's scan, sensing, poses (the localizer's),
-    states and commands reach the recording."""
-    b = Bus(tmp_path, robots=2, base="localizer = true")
+    """World, localizer, recorder and an agent, each with its own certificate and
+    nothing but its own rights: every tick's scan, sensing, pose (the localizer's),
+    state and command reach the recording. (Agents hearing each other is
+    test_netns's.)"""
+    b = Bus(tmp_path, robots=1, base="localizer = true")
     fleet, ns = b.fleet, ["--ns", b.ns]
     procs = []
     try:
@@ -209,12 +219,11 @@ def test_a_team_runs_on_the_rights_each_process_is_given(tmp_path: Path) -> None
 
         procs.append(start(["record", "--out", str(tmp_path / "run"), "--zenoh-config",
                             conf("recorder", "recorder"), *ns], log=tmp_path / "recorder.log"))
-        procs.append(start(["localizer", "--robots", "2", "--zenoh-config",
+        procs.append(start(["localizer", "--robots", "1", "--zenoh-config",
                             conf("localizer", "localizer"), *ns], log=tmp_path / "loc.log"))
-        procs += [start(["agent", "--id", str(i), "--robots", "2", "--zenoh-config",
-                         conf(f"agent{i}", fleet.robot(i)), *ns], log=tmp_path / f"agent{i}.log")
-                  for i in range(2)]
-        world = start(["world", "--robots", "2", "--localization", "pf", "--duration", "3",
+        procs.append(start(["agent", "--id", "0", "--robots", "1", "--zenoh-config",
+                            conf("agent0", fleet.robot(0)), *ns], log=tmp_path / "agent0.log"))
+        world = start(["world", "--robots", "1", "--localization", "pf", "--duration", "1",
                        "--wait-recorder", "--zenoh-config", conf("world", "world"), *ns],
                       log=tmp_path / "world.log")
         procs.append(world)
@@ -226,10 +235,9 @@ def test_a_team_runs_on_the_rights_each_process_is_given(tmp_path: Path) -> None
         stop(b.proc)
     counts = topic_counts(tmp_path / "run" / "run.mcap")
     ticks = counts["world/tick"]
-    assert ticks == 30, counts
-    for topic in ("laser/scan", "world/truth", "robot/0/sense", "robot/1/sense",
-                  "robot/0/pose", "robot/1/pose", "agent/0/state", "agent/1/state",
-                  "robot/0/cmd", "robot/1/cmd"):
+    assert ticks == 10, counts
+    for topic in ("laser/scan", "world/truth", "robot/0/sense", "robot/0/pose",
+                  "agent/0/state", "robot/0/cmd"):
         assert counts[topic] == ticks, (topic, counts)
 
 
@@ -240,3 +248,108 @@ def topic_counts(path: Path) -> dict[str, int]:
 
     with open(path, "rb") as f:
         return Counter(ch.topic for _, ch, _ in make_reader(f).iter_messages())
+
+
+def test_hardware_bridges_run_as_rendered_and_a_robot_bridges_only_its_own_robot(
+        tmp_path: Path) -> None:
+    """Issue 19, item 9: the base station's btrack-hwbridge.service ran `btrack
+    hwbridge`, no command; robot I's certificate could neither put robot/I/sense nor hear
+    robot/I/cmd. Here a hardware fleet is rendered (its files in this test's directory),
+    and the commands of its units run as systemd would run them: the router, the laser
+    bridge, and robot 0's Create bridge; a second bridge on robot 0's computer, with
+    robot 0's certificate, claims robot 1."""
+    ns, port = unique_ns(), free_port()
+    conf, venv_btrack = tmp_path / "etc", Path(sys.executable).parent / "btrack"
+    fleet = parse(f'''
+namespace = "{ns}"
+btrack = "{venv_btrack}"
+config_dir = "{conf}"
+epoch = {time.time() - 60:.0f}
+[base]
+host = "localhost"
+port = {port}
+world = "hardware"
+laser_port = "{tmp_path / "lms"}"
+world_args = ["--baud", "38400"]
+[tls]
+dir = "{conf / "tls"}"
+[[robots]]
+id = 0
+host = "localhost"
+port = "{tmp_path / "create0"}"
+[[robots]]
+id = 1
+host = "localhost"
+''')
+    files = render(fleet)
+    for name, text in host_files(files, "localhost").items():
+        path = Path(name)
+        if path.is_relative_to(conf):  # this host's configuration, under the test's directory
+            path.parent.mkdir(parents=True, exist_ok=True)
+            # the router listens on loopback only (the rendered one on every interface)
+            path.write_text(text.replace("0.0.0.0", "127.0.0.1"))
+    make_fleet_certs(fleet, conf / "tls", flat=True)
+    creates = {i: CreateEmulator(tmp_path / f"create{i}", cm.MODELS["create"]).start()
+               for i in (0, 1)}
+    lms = LmsEmulator(tmp_path / "lms", lambda: [3.0] * 361).start()
+    keys, procs = Keys(ns), {}
+
+    def run(name: str, argv: list[str]) -> None:
+        procs[name] = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                                       stderr=open(tmp_path / f"{name}.log", "wb"),  # noqa: SIM115
+                                       start_new_session=True)
+
+    try:
+        router = exec_argv(files, "localhost", "btrack-router.service")
+        assert router[:2] == [str(venv_btrack), "router"], router
+        run("router", router)
+        laser = exec_argv(files, "localhost", "btrack-hwbridge.service")
+        assert laser[1:3] == ["bridge", "lms"], laser
+        bridge = exec_argv(files, "localhost", "btrack-bridge@.service", "0")
+        assert bridge[1:3] == ["bridge", "create"] and "--epoch" in bridge, bridge
+        # The bridge's session comes from ZENOH_CONFIG in agent-0.env, robot 0's identity.
+        env = {"ZENOH_CONFIG": str(conf / "zenoh-agent-0.json5"), "PATH": "/usr/bin:/bin"}
+        b = Bus.__new__(Bus)  # the observer's helpers, on this fleet's router
+        b.tmp, b.ns, b.fleet, b.proc = tmp_path, ns, fleet, procs["router"]
+        session, obs = open_observer(b)
+        with session:
+            run("laser", laser)
+            procs["bridge0"] = subprocess.Popen(
+                bridge, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                stderr=open(tmp_path / "bridge0.log", "wb"), start_new_session=True)  # noqa: SIM115
+            claim = [*bridge]
+            claim[claim.index("--id") + 1] = "1"
+            claim[claim.index("--port") + 1] = creates[1].path
+            procs["claim1"] = subprocess.Popen(
+                claim, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                stderr=open(tmp_path / "claim1.log", "wb"), start_new_session=True)  # noqa: SIM115
+            # each robot's agent (its own certificate) commands its robot
+            agents = {i: zenoh.open(zenoh.Config.from_json5(json.dumps(client_config(
+                fleet, fleet.robot(i), host="localhost")))) for i in (0, 1)}
+            try:
+                wait_for(lambda: obs.seen(keys.sense(0)) >= 10, 30, "robot 0's sensing")
+                wait_for(lambda: obs.seen(keys.scan()) >= 2, 30, "the laser's scans")
+                assert procs["claim1"].poll() is None, (tmp_path / "claim1.log").read_text()
+                for k in range(20):  # robot 1's first: when robot 0's are all in, so are they
+                    for i in (1, 0):
+                        agents[i].put(keys.cmd(i), encode(Cmd(k * 0.1, k, i, 0.25, 0.0)))
+                    time.sleep(0.02)
+                wait_for(lambda: creates[0].device.wheel_speeds() == (0.25, 0.25), 10,
+                         "robot 0's wheels driven by its commands")
+                time.sleep(0.3)
+            finally:
+                for s in agents.values():
+                    s.close()
+            for name in ("bridge0", "claim1"):
+                stop(procs[name])
+            summary = {n: json.loads(procs[n].stdout.read().decode().strip().splitlines()[-1])
+                       for n in ("bridge0", "claim1")}
+            assert summary["bridge0"]["cmds"] == 20, summary
+            assert summary["claim1"]["sense"] >= 10, summary  # it did put, nothing arrived
+            assert obs.seen(keys.sense(1)) == 0
+            assert summary["claim1"]["cmds"] == 0 and summary["claim1"]["dropped"] == 0, summary
+    finally:
+        for proc in procs.values():
+            stop(proc)
+        for emu in (*creates.values(), lms):
+            emu.stop()
