@@ -6,6 +6,11 @@ and this test's session as the base station's observer, all on loopback.
   name, plain TCP) cannot join: it fails to open and nothing of it reaches anyone.
 - Robot 2's certificate cannot publish robot 1's command or state, nor hold robot 1's
   liveliness token; the same process's own keys go through (the control).
+- Robot 2's certificate in a hostile process (tests/acl_attacker.py) can put, delete,
+  hold, hear, watch, query and answer nothing of any key class but its own: every key of
+  the wire contract, the namespace's and everything's wildcards, another team's keys;
+  the rules as written say the same for every robot, and give each base station
+  process only its own keys. The router listens with mutual TLS only.
 - Every base station process has a certificate of its own, and a team (world,
   localizer, recorder, agents) runs on the rights each is given and no more.
 - With hardware, the rendered units' own commands run (router, laser bridge, robot
@@ -66,6 +71,9 @@ dir = "{tmp / "tls"}"
         conf = router_config(self.fleet, "127.0.0.1")
         if not acl:
             del conf["access_control"]
+        else:
+            add_test_observer(conf, tmp / "tls")
+        self.router_conf = conf
         self.router_file = self.write("router", conf)
         self.proc = start(["router", "--zenoh-config", str(self.router_file)],
                           log=tmp / "router.log")
@@ -91,6 +99,26 @@ dir = "{tmp / "tls"}"
         finally:
             stop(proc)
         return subprocess.CompletedProcess(args, proc.returncode, out, "")
+
+
+WATCHER_CN = "btrack-test-watcher"
+
+
+def add_test_observer(conf: dict, tls: Path) -> None:
+    """A subject of the tests' own, with every right everywhere (so that it can put,
+    hear, query and answer wherever a robot must not), and its certificate. It changes
+    no one else's rights."""
+    acl = conf["access_control"]
+    acl["rules"].append({"id": "watcher-all", "permission": "allow",
+                         "flows": ["ingress", "egress"],
+                         "messages": ["put", "delete", "declare_subscriber", "query",
+                                      "declare_queryable", "reply", "liveliness_token",
+                                      "declare_liveliness_subscriber", "liveliness_query"],
+                         "key_exprs": ["**"]})
+    acl["subjects"].append({"id": "watcher", "cert_common_names": [WATCHER_CN]})
+    acl["policies"].append({"id": "watcher", "rules": ["watcher-all"], "subjects": ["watcher"]})
+    make_cert((tls / "ca" / "ca.pem", tls / "ca" / "ca.key"), tls / "watcher.pem",
+              tls / "watcher.key", WATCHER_CN)
 
 
 class Observer:
@@ -353,3 +381,242 @@ host = "localhost"
             stop(proc)
         for emu in (*creates.values(), lms):
             emu.stop()
+
+
+# --- every key class a robot must not put, hear, query or answer (issue 19, item 11) --
+
+OTHER_NS = "elsewhere/team"  # another team's namespace on the same router
+
+
+def forbidden(ns: str, rid: int, team: int) -> dict[str, list[str]]:
+    """What robot ``rid`` of a simulated team must not do, by kind: keys it must not put
+    (or delete), tokens it must not hold, keys it must not hear, queries it must not
+    make (or answer): every key of the wire contract but its own, the namespace's and
+    everything's wildcards, and another team's keys."""
+    k, others = Keys(ns), [j for j in range(team) if j != rid]
+    robots_of_others = [key for j in others for key in (k.sense(j), k.pose(j), k.cmd(j))]
+    world = [k.scan(), k.truth(), k.world_tick(), k.world_info(), k.fault(), k.progress()]
+    return {
+        "put": [*robots_of_others, k.sense(rid), k.pose(rid), *(k.state(j) for j in others),
+                *world, k.alive(rid), f"{OTHER_NS}/robot/{rid}/cmd", f"{ns}/anything"],
+        "delete": [k.state(j) for j in others] + [k.cmd(others[0])],
+        "tokens": [*(k.alive(j) for j in others), k.alive_recorder(), k.alive_localizer(),
+                   f"{OTHER_NS}/alive/agent/{rid}"],
+        "hear": [*robots_of_others, k.cmd(rid), *world, f"{OTHER_NS}/robot/{rid}/sense"],
+        "subscribe": [f"{ns}/**", "**", f"{ns}/robot/*/sense", f"{ns}/world/**"],
+        "watch": [f"{ns}/alive/**", k.alive_recorder(), k.alive_localizer()],
+        "query": [k.progress(), k.sense(others[0]), f"{ns}/**", f"{OTHER_NS}/x"],
+        "answer": [f"{ns}/robot/{rid}/answer", k.progress(), f"{ns}/**"],
+    }
+
+
+def may(acl: dict, subject: str, flow: str, message: str, key: str) -> bool:
+    """Whether the access control lets ``subject`` send (ingress) or be sent (egress)
+    ``message`` on ``key``: some rule of its policies allows it on a key expression
+    that includes ``key`` (every rule here allows; the default denies)."""
+    rules = {r["id"]: r for r in acl["rules"]}
+    assert acl["default_permission"] == "deny"
+    mine = [rules[rid] for p in acl["policies"] if subject in p["subjects"] for rid in p["rules"]]
+    return any(r["permission"] == "allow" and flow in r["flows"] and message in r["messages"]
+               and any(zenoh.KeyExpr(e).includes(zenoh.KeyExpr(key)) for e in r["key_exprs"])
+               for r in mine)
+
+
+def test_the_rendered_rules_forbid_a_robot_every_key_class_but_its_own(bus) -> None:
+    """The rules as written (no router): for every robot, every forbidden kind and key;
+    and the same rules let it do its own work (so the reading of the rules is right)."""
+    b, _ = bus
+    acl, ns = b.router_conf["access_control"], b.ns
+    k = Keys(ns)
+    for rid in range(b.fleet.team):
+        me, bad = f"robot{rid}", forbidden(ns, rid, b.fleet.team)
+        checks = [("ingress", "put", bad["put"]), ("ingress", "delete", bad["delete"]),
+                  ("ingress", "liveliness_token", bad["tokens"]),
+                  ("egress", "put", bad["hear"]),
+                  ("ingress", "declare_subscriber", bad["hear"] + bad["subscribe"]),
+                  ("ingress", "declare_liveliness_subscriber", bad["watch"]),
+                  ("egress", "liveliness_token", bad["watch"][1:]),
+                  ("ingress", "query", bad["query"]),
+                  ("ingress", "liveliness_query", bad["watch"]),
+                  ("ingress", "declare_queryable", bad["answer"]),
+                  ("ingress", "reply", bad["answer"] + bad["query"]),
+                  ("egress", "query", bad["answer"] + bad["query"])]
+        for flow, message, keys in checks:
+            allowed = [key for key in keys if may(acl, me, flow, message, key)]
+            assert not allowed, (me, flow, message, allowed)
+        own = [("ingress", "put", k.cmd(rid)), ("ingress", "put", k.state(rid)),
+               ("ingress", "liveliness_token", k.alive(rid)), ("egress", "put", k.sense(rid)),
+               ("egress", "put", k.pose(rid)), ("egress", "put", k.state((rid + 1) % 3)),
+               ("ingress", "declare_subscriber", k.state("*")),
+               ("ingress", "declare_liveliness_subscriber", k.alive("*"))]
+        assert all(may(acl, me, *x) for x in own), me
+
+
+def test_each_base_station_process_may_put_and_hear_only_its_own_keys(bus) -> None:
+    """The rules as written, for the base station's processes: over every key of the
+    wire contract, what each may put and be sent is exactly what it needs."""
+    b, _ = bus
+    acl, k, n = b.router_conf["access_control"], Keys(b.ns), b.fleet.team
+    every = [*(key for i in range(n) for key in (k.sense(i), k.pose(i), k.cmd(i),
+                                                   k.state(i), k.alive(i))),
+             k.scan(), k.truth(), k.world_tick(), k.world_info(), k.fault(), k.progress(),
+             k.alive_recorder(), k.alive_localizer()]
+
+    def rights(subject: str, flow: str, message: str) -> set[str]:
+        return {key for key in every if may(acl, subject, flow, message, key)}
+
+    robots = range(n)
+    assert rights("world", "ingress", "put") == {
+        *(k.sense(i) for i in robots), k.scan(), k.truth(), k.world_tick(), k.world_info()}
+    assert rights("world", "egress", "put") == {k.cmd(i) for i in robots}
+    assert rights("recorder", "ingress", "put") == set()
+    assert rights("recorder", "egress", "put") == set(every)  # it hears everything
+    assert rights("recorder", "ingress", "declare_queryable") == {k.progress()}
+    for role in ("world", "recorder"):
+        assert rights(role, "ingress", "query") == set()
+    assert rights("world", "ingress", "liveliness_token") == set()
+    assert rights("recorder", "ingress", "liveliness_token") == {k.alive_recorder()}
+
+
+def test_the_router_listens_with_mutual_tls_only(bus) -> None:
+    """Every endpoint the router listens on is TLS with client certificates; a plain
+    session to each is refused (a plain-TCP listener would let anyone in)."""
+    b, _ = bus
+    conf = b.router_conf
+    assert conf["transport"]["link"]["tls"]["enable_mtls"] is True
+    endpoints = conf["listen"]["endpoints"]
+    assert endpoints and all(e.startswith("tls/") for e in endpoints), endpoints
+    for e in endpoints:
+        plain = b.robot_config(0)
+        del plain["transport"]["link"]["tls"]
+        plain["connect"]["endpoints"] = ["tcp/" + e.split("/", 1)[1]]
+        res = b.probe(plain, "plain", claim=0)
+        assert res.returncode == 3 and "cannot open" in res.stdout, (e, res.stdout)
+
+
+class Watcher:
+    """The tests' own subject on the router: hears everything, answers some queries,
+    and counts what came from the attacker (its payloads are marked)."""
+
+    def __init__(self, b: Bus, answer: list[str]):
+        conf = client_config(b.fleet, "recorder")
+        tls = conf["transport"]["link"]["tls"]
+        tls.update(connect_certificate=str(b.tmp / "tls" / "watcher.pem"),
+                   connect_private_key=str(b.tmp / "tls" / "watcher.key"))
+        self.lock = threading.Lock()
+        self.puts: list[str] = []
+        self.tokens: list[tuple[float, str]] = []
+        self.queries: list[str] = []
+        self.hear = zenoh.open(zenoh.Config.from_json5(json.dumps(conf)))
+        self.speak = zenoh.open(zenoh.Config.from_json5(json.dumps(conf)))
+        self._keep = [
+            self.hear.declare_subscriber("**", self._on_put),
+            self.hear.liveliness().declare_subscriber("**", self._on_token),
+            *(self.hear.declare_queryable(k, self._on_query) for k in answer)]
+
+    def _on_put(self, sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.DELETE or \
+                sample.payload.to_bytes().startswith(b"attacker"):
+            with self.lock:
+                self.puts.append(str(sample.key_expr))
+
+    def _on_token(self, sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.PUT:
+            with self.lock:
+                self.tokens.append((time.monotonic(), str(sample.key_expr)))
+
+    def _on_query(self, query: zenoh.Query) -> None:
+        payload = query.payload.to_bytes() if query.payload is not None else b""
+        if payload.startswith(b"attacker"):
+            with self.lock:
+                self.queries.append(str(query.key_expr))
+        query.reply(query.key_expr, b"watcher")
+
+    def close(self) -> None:
+        for s in (self.hear, self.speak):
+            s.close()
+
+
+def test_a_robot_can_put_hear_query_or_answer_nothing_of_any_other_key_class(bus) -> None:
+    """Robot 2's certificate in a hostile process (tests/acl_attacker.py) tries every
+    kind and key of ``forbidden`` through the router; each attempt comes before a
+    control of the same kind that goes through, so that none arriving means none was
+    let through."""
+    b, _ = bus
+    ns, rid, k = b.ns, 2, Keys(b.ns)
+    bad = forbidden(ns, rid, b.fleet.team)
+    plan = {"subscribe": bad["hear"] + bad["subscribe"], "may_subscribe": [k.state("*")],
+            "watch": bad["watch"], "may_watch": [k.alive("*")],
+            "answer": bad["answer"], "control_hear": k.sense(rid), "tokens": bad["tokens"],
+            "put": bad["put"], "delete": bad["delete"], "query": bad["query"],
+            "control_token": k.alive(rid), "control_put": [k.cmd(rid), k.state(rid)]}
+    (b.tmp / "plan.json").write_text(json.dumps(plan))
+    config = b.write("attacker", b.robot_config(rid))
+    # the watcher answers where it may be asked (concrete keys: a wildcard queryable of
+    # its own would match the attacker's queryables below)
+    w = Watcher(b, answer=[q for q in bad["query"] if "*" not in q])
+    tokens = [w.speak.liveliness().declare_token(key)  # what it must not see, and may
+              for key in (k.alive_recorder(), k.alive_localizer(), k.alive(0))]
+    proc = subprocess.Popen([sys.executable, str(ROOT / "tests" / "acl_attacker.py"),
+                             str(config), str(b.tmp / "plan.json")], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            start_new_session=True)
+    lines: list[str] = []
+
+    def read_until(word: str, timeout: float) -> None:
+        reader = threading.Thread(target=lambda: lines.extend(
+            iter(lambda: proc.stdout.readline().strip() or "EOF", word)), daemon=True)
+        reader.start()
+        reader.join(timeout)
+        assert not reader.is_alive() and "EOF" not in lines, (word, lines)
+
+    try:
+        read_until("ready", 30)
+        # every key it must not hear, then the control, round after round until it has
+        # heard the control a few times: each round's forbidden puts came first
+        heard_it = threading.Event()
+        reader = threading.Thread(target=lambda: (read_until("heard", 30), heard_it.set()),
+                                  daemon=True)
+        reader.start()
+        while not heard_it.is_set() and reader.is_alive():
+            for key in bad["hear"]:
+                w.speak.put(key, b"watcher")
+            w.speak.put(k.state(0), b"watcher")
+            w.speak.put(k.sense(rid), b"watcher")
+            time.sleep(0.02)
+        assert heard_it.is_set(), lines
+        for token in tokens:
+            token.undeclare()
+        went = time.monotonic()
+        proc.stdin.write("go\n")
+        proc.stdin.flush()
+        read_until("done", 30)
+        report = json.loads(lines[-1])
+        # what it put, deleted, held or asked: only its own control arrived
+        wait_for(lambda: w.puts.count(k.cmd(rid)) >= 5 and w.puts.count(k.state(rid)) >= 5,
+                 10, "the attacker's own command and state")
+        wait_for(lambda: any(key == k.alive(rid) for t, key in w.tokens if t > went), 10,
+                 "the attacker's own token")
+        assert sorted(set(w.puts)) == sorted({k.cmd(rid), k.state(rid)}), w.puts
+        assert {key for t, key in w.tokens if t > went} == {k.alive(rid)}, w.tokens
+        assert w.queries == [] and report["replies"] == {}, (w.queries, report)
+        # what it heard: the control and the team's states only
+        assert set(report["heard"]) == {k.sense(rid), k.state(0)}, report["heard"]
+        assert report["tokens_seen"] == [k.alive(0)], report["tokens_seen"]
+        # what it would answer: nobody is routed to its queryables, nor told of them
+        for key in (f"{ns}/robot/{rid}/answer", k.progress()):
+            answers = [r.ok.payload.to_bytes() for r in w.speak.get(key, timeout=0.5)
+                       if r.ok is not None]
+            assert b"attacker answer" not in answers, (key, answers)
+        assert w.speak.get(k.progress(), timeout=0.5)  # the control: the watcher's answer
+        querier = w.speak.declare_querier(f"{ns}/robot/{rid}/answer")
+        control = w.speak.declare_querier(k.progress())  # the watcher's own queryable
+        wait_for(lambda: control.matching_status.matching, 10, "the control's queryable")
+        assert not querier.matching_status.matching  # its own would have been as quick
+        proc.stdin.write("bye\n")
+        proc.stdin.flush()
+        out, _ = proc.communicate(timeout=30)
+        assert json.loads(out.strip().splitlines()[-1]) == {"asked": []}, out
+    finally:
+        stop(proc)
+        w.close()
