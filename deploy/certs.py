@@ -18,6 +18,7 @@ import secrets
 import shutil
 import subprocess
 import tempfile
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 from deploy.fleet import Fleet
@@ -51,11 +52,27 @@ def make_ca(out: Path, name: str = "btrack fleet CA", days: int = 3650) -> tuple
     return pem, key
 
 
+# `openssl ca` is the one of openssl 3.0's commands that sets an end date to the second
+_CA_CONF = """[ca]
+default_ca = short
+[short]
+database = {dir}/index.txt
+new_certs_dir = {dir}
+serial = {dir}/serial
+default_md = sha256
+policy = anything
+[anything]
+commonName = supplied
+"""
+
+
 def make_cert(ca: tuple[Path, Path], pem: Path, key: Path, common_name: str,
-              names: tuple[str, ...] = (), days: int = 825) -> None:
+              names: tuple[str, ...] = (), days: int = 825,
+              not_after: datetime | None = None) -> None:
     """A certificate signed by ``ca`` for ``common_name``, usable both as a TLS
     server and a client; ``names`` (host names or IP addresses) go in its
-    subjectAltName."""
+    subjectAltName. It is valid for ``days``, or until ``not_after`` (to the second:
+    tests of expiry)."""
     pem.parent.mkdir(parents=True, exist_ok=True)
     key.parent.mkdir(parents=True, exist_ok=True)
     alt = []
@@ -75,9 +92,21 @@ def make_cert(ca: tuple[Path, Path], pem: Path, key: Path, common_name: str,
         extfile.write_text("\n".join(ext) + "\n")
         _openssl("req", "-new", "-newkey", "ec", "-pkeyopt", f"ec_paramgen_curve:{CURVE}",
                  "-nodes", "-keyout", str(key), "-out", str(csr), "-subj", f"/CN={common_name}")
-        _openssl("x509", "-req", "-in", str(csr), "-CA", str(ca[0]), "-CAkey", str(ca[1]),
-                 "-set_serial", str(secrets.randbits(63)), "-days", str(days),
-                 "-extfile", str(extfile), "-out", str(pem))
+        if not_after is None:
+            _openssl("x509", "-req", "-in", str(csr), "-CA", str(ca[0]), "-CAkey", str(ca[1]),
+                     "-set_serial", str(secrets.randbits(63)), "-days", str(days),
+                     "-extfile", str(extfile), "-out", str(pem))
+        else:
+            conf = Path(tmp) / "ca.cnf"
+            conf.write_text(_CA_CONF.format(dir=tmp))
+            (Path(tmp) / "index.txt").write_text("")
+            (Path(tmp) / "serial").write_text(f"{secrets.randbits(63):016X}\n")
+            stamp = "%y%m%d%H%M%SZ"
+            start = datetime.now(UTC) - timedelta(minutes=1)
+            _openssl("ca", "-batch", "-notext", "-config", str(conf), "-cert", str(ca[0]),
+                     "-keyfile", str(ca[1]), "-in", str(csr), "-out", str(pem),
+                     "-extfile", str(extfile), "-startdate", start.strftime(stamp),
+                     "-enddate", not_after.astimezone(UTC).strftime(stamp))
     os.chmod(key, 0o600)
 
 

@@ -203,6 +203,8 @@ def router_config(fleet: Fleet, listen_host: str = "0.0.0.0") -> dict[str, Any]:
             "root_ca_certificate": p["root_ca_certificate"],
             "listen_certificate": p["cert"], "listen_private_key": p["key"],
             "enable_mtls": True,  # every peer shows a certificate signed by our CA
+            # a link ends when the peer's certificate expires, not when it next reconnects
+            "close_link_on_expiration": True,
         }
     if fleet.tls.access_control:
         conf["access_control"] = access_control(fleet)
@@ -236,6 +238,7 @@ def client_config(fleet: Fleet, who: Robot | str, host: str | None = None) -> di
             "root_ca_certificate": p["root_ca_certificate"],
             "connect_certificate": p["cert"], "connect_private_key": p["key"],
             "enable_mtls": True,
+            "close_link_on_expiration": True,  # the router's certificate, likewise
         }
     return conf
 

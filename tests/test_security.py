@@ -26,6 +26,7 @@ import subprocess
 import sys
 import threading
 import time
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import pytest
@@ -125,6 +126,7 @@ class Observer:
     """Everything under the namespace that reaches the base station, by key."""
 
     def __init__(self, session: zenoh.Session, ns: str):
+        self.session = session
         self.lock = threading.Lock()
         self.keys: list[str] = []
         self.tokens: list[str] = []
@@ -141,6 +143,10 @@ class Observer:
         if sample.kind == zenoh.SampleKind.PUT:
             with self.lock:
                 self.tokens.append(str(sample.key_expr))
+
+    def hear_times(self, key: str, into: list[float]) -> zenoh.Subscriber:
+        """Record the wall time every put on ``key`` arrives (until undeclared)."""
+        return self.session.declare_subscriber(key, lambda s: into.append(time.time()))
 
     def seen(self, fragment: str) -> int:
         with self.lock:
@@ -215,6 +221,39 @@ def test_a_process_without_a_valid_certificate_cannot_join(bus, tmp_path: Path) 
     assert res.returncode == 0
     wait_for(lambda: obs.seen(f"{b.ns}/robot/0/cmd") >= 20, 10, "robot 0's own commands")
     assert obs.seen(f"{b.ns}/robot/2/cmd") == 20  # only robot 2's own, from the first test
+
+
+def test_a_link_ends_when_its_certificate_expires(bus, tmp_path: Path) -> None:
+    """Issue 19, item 8: a certificate that expired while its link was up kept the link
+    (78 puts after expiry, the last 39.6 s after). Robot 1 with a certificate valid for
+    2 to 3 s more (to the second) puts its command every 20 ms and goes on 1.6 s past
+    the expiry: what reaches the base station stops within 1 s of it, and the
+    certificate opens no new link."""
+    b, obs = bus
+    ca = (b.tmp / "tls" / "ca" / "ca.pem", b.tmp / "tls" / "ca" / "ca.key")
+    expires = (datetime.now(UTC) + timedelta(seconds=3)).replace(microsecond=0)
+    assert (expires - datetime.now(UTC)).total_seconds() > 2
+    make_cert(ca, tmp_path / "short.pem", tmp_path / "short.key", Fleet.common_name(1),
+              ("localhost",), not_after=expires)
+    conf = b.robot_config(1)
+    conf["transport"]["link"]["tls"].update(connect_certificate=str(tmp_path / "short.pem"),
+                                            connect_private_key=str(tmp_path / "short.key"))
+    key = Keys(b.ns).cmd(1)
+    arrived: list[float] = []
+    watch = obs.hear_times(key, arrived)
+    sent_after = 0
+    with zenoh.open(zenoh.Config.from_json5(json.dumps(conf))) as robot:
+        end = expires.timestamp() + 1.6
+        while time.time() < end:
+            robot.put(key, encode(Cmd(0.0, 0, 1, 0.0, 0.0)))
+            sent_after += time.time() > expires.timestamp()
+            time.sleep(0.02)
+    watch.undeclare()
+    assert sent_after > 30
+    assert arrived and arrived[0] < expires.timestamp(), "none arrived while it was valid"
+    assert max(arrived) < expires.timestamp() + 1.0, (max(arrived) - expires.timestamp())
+    res = b.probe(conf, "expired", claim=1)
+    assert res.returncode == 3 and "cannot open" in res.stdout, res.stdout
 
 
 def test_without_access_control_the_same_claim_would_go_through(tmp_path: Path) -> None:
