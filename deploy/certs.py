@@ -1,9 +1,11 @@
 """A certificate authority and the certificates a fleet needs, made with the
 ``openssl`` command (``btrack deploy certs``; the tests use it in a temp dir).
 
-The base station's certificate (common name ``btrack-base``) names its host, its
-address and localhost, since robots check the router's name; robot i's
-(``btrack-robot-I``) is what the router's access control tells robots apart by.
+The router's certificate (common name ``btrack-base``) names the base station's
+host, its address and localhost, since clients check the router's name; each base
+station process has its own (``btrack-world``, ``btrack-laser``, ``btrack-localizer``,
+``btrack-recorder``) and robot i its (``btrack-robot-I``): the common name is what the
+router's access control grants rights to.
 Good enough for a lab and for tests; a site with its own PKI issues the same
 names from it instead.
 """
@@ -16,6 +18,7 @@ import secrets
 import shutil
 import subprocess
 import tempfile
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 from deploy.fleet import Fleet
@@ -49,11 +52,27 @@ def make_ca(out: Path, name: str = "btrack fleet CA", days: int = 3650) -> tuple
     return pem, key
 
 
+# `openssl ca` is the one of openssl 3.0's commands that sets an end date to the second
+_CA_CONF = """[ca]
+default_ca = short
+[short]
+database = {dir}/index.txt
+new_certs_dir = {dir}
+serial = {dir}/serial
+default_md = sha256
+policy = anything
+[anything]
+commonName = supplied
+"""
+
+
 def make_cert(ca: tuple[Path, Path], pem: Path, key: Path, common_name: str,
-              names: tuple[str, ...] = (), days: int = 825) -> None:
+              names: tuple[str, ...] = (), days: int = 825,
+              not_after: datetime | None = None) -> None:
     """A certificate signed by ``ca`` for ``common_name``, usable both as a TLS
     server and a client; ``names`` (host names or IP addresses) go in its
-    subjectAltName."""
+    subjectAltName. It is valid for ``days``, or until ``not_after`` (to the second:
+    tests of expiry)."""
     pem.parent.mkdir(parents=True, exist_ok=True)
     key.parent.mkdir(parents=True, exist_ok=True)
     alt = []
@@ -73,9 +92,21 @@ def make_cert(ca: tuple[Path, Path], pem: Path, key: Path, common_name: str,
         extfile.write_text("\n".join(ext) + "\n")
         _openssl("req", "-new", "-newkey", "ec", "-pkeyopt", f"ec_paramgen_curve:{CURVE}",
                  "-nodes", "-keyout", str(key), "-out", str(csr), "-subj", f"/CN={common_name}")
-        _openssl("x509", "-req", "-in", str(csr), "-CA", str(ca[0]), "-CAkey", str(ca[1]),
-                 "-set_serial", str(secrets.randbits(63)), "-days", str(days),
-                 "-extfile", str(extfile), "-out", str(pem))
+        if not_after is None:
+            _openssl("x509", "-req", "-in", str(csr), "-CA", str(ca[0]), "-CAkey", str(ca[1]),
+                     "-set_serial", str(secrets.randbits(63)), "-days", str(days),
+                     "-extfile", str(extfile), "-out", str(pem))
+        else:
+            conf = Path(tmp) / "ca.cnf"
+            conf.write_text(_CA_CONF.format(dir=tmp))
+            (Path(tmp) / "index.txt").write_text("")
+            (Path(tmp) / "serial").write_text(f"{secrets.randbits(63):016X}\n")
+            stamp = "%y%m%d%H%M%SZ"
+            start = datetime.now(UTC) - timedelta(minutes=1)
+            _openssl("ca", "-batch", "-notext", "-config", str(conf), "-cert", str(ca[0]),
+                     "-keyfile", str(ca[1]), "-in", str(csr), "-out", str(pem),
+                     "-extfile", str(extfile), "-startdate", start.strftime(stamp),
+                     "-enddate", not_after.astimezone(UTC).strftime(stamp))
     os.chmod(key, 0o600)
 
 
@@ -98,6 +129,10 @@ def make_fleet_certs(fleet: Fleet, out: Path, flat: bool = False) -> list[Path]:
     names = tuple(n for n in (fleet.base.host, fleet.base.address, "localhost", "127.0.0.1") if n)
     make_cert(ca, d / tls.base_cert, d / tls.base_key, Fleet.common_name(None), names)
     written += [d / tls.ca, d / tls.base_cert, d / tls.base_key]
+    for role in fleet.base_roles:  # a client certificate each: its name is its rights
+        pem, key = tls.role_files(role)
+        make_cert(ca, d / pem, d / key, Fleet.common_name(role))
+        written += [d / pem, d / key]
     for r in fleet.robots:
         d = host_dir(r.host)
         make_cert(ca, d / r.cert, d / r.key, Fleet.common_name(r.id), (r.host,))

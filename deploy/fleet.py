@@ -9,6 +9,7 @@ where it can be found, the line at fault.
 
 from __future__ import annotations
 
+import math
 import re
 import tomllib
 from dataclasses import dataclass, field
@@ -31,8 +32,11 @@ class Base:
     host: str  # the name robots connect to; it is in the base station's certificate
     address: str | None = None  # an IP robots may use instead; also in the certificate
     port: int = 7447
-    world: str = "sim"  # "sim": btrack world; "hardware": btrack hwbridge; "none"
-    world_args: tuple[str, ...] = ()
+    # "sim": btrack world here; "hardware": the laser's bridge (btrack bridge lms) here
+    # and each robot's Create bridge on its computer; "none"
+    world: str = "sim"
+    world_args: tuple[str, ...] = ()  # btrack world's, or btrack bridge lms's (hardware)
+    laser_port: str = "/dev/ttyUSB1"  # hardware: the SICK LMS's serial device
     localizer: bool = False
     localizer_args: tuple[str, ...] = ()
     recorder: bool = True
@@ -49,6 +53,8 @@ class Robot:
     cert: str  # file names under the TLS directory on that host
     key: str
     agent_args: tuple[str, ...] = ()
+    port: str = "/dev/ttyUSB0"  # hardware: its Create's serial device
+    bridge_args: tuple[str, ...] = ()  # hardware: more for its btrack bridge create
 
 
 @dataclass(frozen=True)
@@ -56,9 +62,14 @@ class Tls:
     enabled: bool = True
     dir: str = "/etc/btrack/tls"  # where certificates live on every host
     ca: str = "ca.pem"
-    base_cert: str = "base.pem"
+    base_cert: str = "base.pem"  # the router's (it listens with it)
     base_key: str = "base.key"
     access_control: bool = True  # a robot may publish only its own keys
+
+    @staticmethod
+    def role_files(role: str) -> tuple[str, str]:
+        """Certificate and key file of a base station process (``Fleet.base_roles``)."""
+        return f"{role}.pem", f"{role}.key"
 
 
 @dataclass(frozen=True)
@@ -72,6 +83,10 @@ class Fleet:
     user: str = "btrack"
     lease_s: float = 1.0  # transport lease every robot announces
     agent_args: tuple[str, ...] = ()  # extra arguments for every agent
+    # hardware: the run's epoch (Unix seconds) every bridge counts time and ticks from,
+    # so that robots of the team share k (their clocks NTP-synchronised)
+    epoch: float | None = None
+    bridge_args: tuple[str, ...] = ()  # hardware: more for every btrack bridge create
 
     @property
     def team(self) -> int:
@@ -91,10 +106,38 @@ class Fleet:
             host = f"[{host}]"
         return f"{proto}/{host}:{self.base.port}"
 
+    @property
+    def base_roles(self) -> tuple[str, ...]:
+        """The base station's processes that join the bus, each with a certificate and
+        rights of its own: ``world`` (the simulator), ``laser`` (the LMS bridge, with
+        hardware), ``localizer``, ``recorder``."""
+        world = {"sim": ("world",), "hardware": ("laser",)}.get(self.base.world, ())
+        return (*world, *(("localizer",) if self.base.localizer else ()),
+                *(("recorder",) if self.base.recorder else ()))
+
+    def tls_files(self, host: str) -> dict[str, bool]:
+        """The files ``host`` needs in the TLS directory, each with whether it is a
+        private key: the CA's certificate, and the certificate and key of every identity
+        that runs there."""
+        t = self.tls
+        pairs = []
+        if host == self.base.host:
+            pairs.append((t.base_cert, t.base_key))
+            pairs += [t.role_files(role) for role in self.base_roles]
+        pairs += [(r.cert, r.key) for r in self.robots if r.host == host]
+        files = {t.ca: False}
+        for cert, key in pairs:
+            files.setdefault(cert, False)
+            files[key] = True
+        return files
+
     @staticmethod
-    def common_name(rid: int | None) -> str:
-        """The certificate common name of robot ``rid`` (None: the base station)."""
-        return "btrack-base" if rid is None else f"btrack-robot-{rid}"
+    def common_name(who: int | str | None) -> str:
+        """The certificate common name of robot ``who`` (an id), of a base station
+        process (a role of ``base_roles``), or (None) of the router."""
+        if who is None:
+            return "btrack-base"
+        return f"btrack-robot-{who}" if isinstance(who, int) else f"btrack-{who}"
 
 
 # --- loading ---------------------------------------------------------------------------
@@ -219,6 +262,9 @@ def parse(text: str, source: str = "fleet.toml") -> Fleet:
                    "not a user name")
     lease_s = top.get("lease_s", float, 1.0, check=_positive)
     agent_args = top.get("agent_args", tuple, ())
+    epoch = top.get("epoch", float, None, check=lambda v: None if math.isfinite(v) and v >= 0
+                    else "must be Unix seconds (date +%s)")
+    bridge_args = top.get("bridge_args", tuple, ())
 
     b = top.table("base", required=True)
     base = Base(
@@ -229,12 +275,21 @@ def parse(text: str, source: str = "fleet.toml") -> Fleet:
         world=b.get("world", str, "sim", check=lambda v: None if v in ("sim", "hardware", "none")
                     else "one of sim, hardware, none"),
         world_args=b.get("world_args", tuple, ()),
-        localizer=b.get("localizer", bool, False),
+        laser_port=b.get("laser_port", str, "/dev/ttyUSB1", check=_abs),
+        # with hardware, poses come from the laser: the localizer is on unless refused
+        localizer=b.get("localizer", bool, b.data.get("world") == "hardware"),
         localizer_args=b.get("localizer_args", tuple, ()),
         recorder=b.get("recorder", bool, True),
         recorder_dir=b.get("recorder_dir", str, "/var/lib/btrack/runs", check=_abs),
         lease_s=b.get("lease_s", float, lease_s, check=_positive),
     )
+    if base.world == "hardware":
+        if not base.localizer:
+            raise b.fail("localizer", 'world = "hardware" needs the localizer: the robots\' '
+                                      "poses come from the laser")
+        if epoch is None:
+            raise b.fail("world", 'world = "hardware" needs a top-level epoch = UNIX_SECONDS '
+                                  "(date +%s, once): every bridge counts ticks from it")
     b.done()
 
     t = top.table("tls")
@@ -267,6 +322,8 @@ def parse(text: str, source: str = "fleet.toml") -> Fleet:
             cert=r.get("cert", str, f"robot-{rid}.pem", check=_file),
             key=r.get("key", str, f"robot-{rid}.key", check=_file),
             agent_args=r.get("agent_args", tuple, ()),
+            port=r.get("port", str, "/dev/ttyUSB0", check=_abs),
+            bridge_args=r.get("bridge_args", tuple, ()),
         )
         r.done()
         if any(o.id == rid for o in robots):
@@ -278,7 +335,7 @@ def parse(text: str, source: str = "fleet.toml") -> Fleet:
     top.done()
     return Fleet(namespace=namespace, base=base, robots=tuple(sorted(robots, key=lambda r: r.id)),
                  tls=tls, btrack=btrack, config_dir=config_dir, user=user, lease_s=lease_s,
-                 agent_args=agent_args)
+                 agent_args=agent_args, epoch=epoch, bridge_args=bridge_args)
 
 
 def load(path: str | Path) -> Fleet:

@@ -39,8 +39,9 @@ def rendered(tmp_path_factory) -> Path:
 def test_every_host_gets_its_files(rendered: Path) -> None:
     assert {p.name for p in rendered.iterdir() if p.is_dir()} == HOSTS
     base = rendered / "base.lab"
-    for rel in ("etc/btrack/zenoh-router.json5", "etc/btrack/zenoh-base.json5",
-                "etc/btrack/base.env", "etc/systemd/system/btrack-router.service",
+    for rel in ("etc/btrack/zenoh-router.json5", "etc/btrack/zenoh-world.json5",
+                "etc/btrack/zenoh-recorder.json5", "etc/btrack/base.env",
+                "etc/systemd/system/btrack-router.service",
                 "etc/systemd/system/btrack-world.service",
                 "etc/systemd/system/btrack-recorder.service"):
         assert (base / rel).is_file(), rel
@@ -62,7 +63,7 @@ def test_every_host_gets_its_files(rendered: Path) -> None:
 
 def test_json5_files_load_in_zenoh(rendered: Path) -> None:
     files = sorted(rendered.rglob("*.json5"))
-    assert len(files) == 5
+    assert len(files) == 6  # the router, the world, the recorder, three robots
     for path in files:
         conf = zenoh.Config.from_file(str(path))
         text = str(conf)
@@ -73,6 +74,12 @@ def test_json5_files_load_in_zenoh(rendered: Path) -> None:
     assert '"default_permission":"deny"' in router.replace(" ", "")
     robot = str(zenoh.Config.from_file(str(rendered / "robot2.lab/etc/btrack/zenoh-agent-2.json5")))
     assert "tls/base.lab:7447" in robot and "/etc/btrack/tls/robot-2.pem" in robot
+    for role in ("world", "recorder"):  # each base station process with its own certificate
+        path = rendered / f"base.lab/etc/btrack/zenoh-{role}.json5"
+        conf = str(zenoh.Config.from_file(str(path)))
+        assert "tls/localhost:7447" in conf and f"/etc/btrack/tls/{role}.pem" in conf
+        unit = (rendered / f"base.lab/etc/systemd/system/btrack-{role}.service").read_text()
+        assert f"--zenoh-config /etc/btrack/zenoh-{role}.json5" in unit
 
 
 @pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="no systemd-analyze here")
@@ -80,8 +87,9 @@ def test_units_pass_systemd_analyze_verify(rendered: Path, tmp_path: Path) -> No
     units = sorted((rendered / "base.lab/etc/systemd/system").glob("*.service"))
     # and the units the example leaves out: hardware bridges and the localizer
     fleet = parse(EXAMPLE.read_text())
-    hw = dataclasses.replace(fleet, btrack=str(BTRACK), base=dataclasses.replace(
-        fleet.base, world="hardware", localizer=True))
+    hw = dataclasses.replace(fleet, btrack=str(BTRACK), epoch=1767225600.0,
+                             base=dataclasses.replace(fleet.base, world="hardware",
+                                                      localizer=True))
     hw_units = {k: v for k, v in render(hw).items() if k.endswith((
         "btrack-hwbridge.service", "btrack-localizer.service"))}
     assert len(hw_units) == 2 and "btrack-world.service" not in " ".join(render(hw))
@@ -92,7 +100,11 @@ def test_units_pass_systemd_analyze_verify(rendered: Path, tmp_path: Path) -> No
     agent_dir.mkdir()
     shutil.copy(rendered / "robot1.lab/etc/systemd/system/btrack-agent@.service", agent_dir)
     (agent_dir / "btrack-agent@1.service").symlink_to("btrack-agent@.service")
-    for group in (units, [agent_dir / "btrack-agent@1.service"]):
+    bridge = render(hw)["robot1.lab/etc/systemd/system/btrack-bridge@.service"]
+    (agent_dir / "btrack-bridge@.service").write_text(bridge)
+    (agent_dir / "btrack-bridge@1.service").symlink_to("btrack-bridge@.service")
+    for group in (units, [agent_dir / "btrack-agent@1.service",
+                          agent_dir / "btrack-bridge@1.service"]):
         res = subprocess.run(["systemd-analyze", "verify", *map(str, group)],
                              capture_output=True, text=True, timeout=60)
         # verify returns 0 on unknown keys; they only show as warnings, so none is allowed
@@ -110,6 +122,11 @@ def test_robot_may_publish_only_its_own_keys_in_the_rendered_acl() -> None:
     assert rules["robot1-token"]["key_exprs"] == ["btrack/lab1/alive/agent/1"]
     subjects = {s["id"]: s for s in acl["subjects"]}
     assert subjects["robot1"]["cert_common_names"] == ["btrack-robot-1"]
+    # every base station process has a name of its own; the router's has no rights
+    assert {s["id"]: s["cert_common_names"] for s in acl["subjects"]
+            if not s["id"].startswith("robot")} == {
+        "world": ["btrack-world"], "recorder": ["btrack-recorder"]}
+    assert not [s for s in acl["subjects"] if "btrack-base" in s["cert_common_names"]]
     # no robot rule lets it put or declare a token on a key with a wildcard
     for rule in acl["rules"]:
         if rule["id"].startswith("robot") and "ingress" in rule["flows"]:
@@ -135,6 +152,13 @@ def test_certs_for_the_fleet_chain_to_its_ca(tmp_path: Path) -> None:
     assert res.returncode == 0, res.stderr
     tls = tmp_path / "robot1.lab/etc/btrack/tls"
     assert sorted(p.name for p in tls.iterdir()) == ["ca.pem", "robot-1.key", "robot-1.pem"]
+    base = tmp_path / "base.lab/etc/btrack/tls"
+    assert sorted(p.name for p in base.iterdir()) == [
+        "base.key", "base.pem", "ca.pem", "recorder.key", "recorder.pem", "world.key",
+        "world.pem"]
+    world = subprocess.run(["openssl", "x509", "-noout", "-subject", "-in",
+                            str(base / "world.pem")], capture_output=True, text=True).stdout
+    assert "CN = btrack-world" in world
     assert (tls / "robot-1.key").stat().st_mode & 0o077 == 0
     assert not list(tmp_path.glob("*.lab/**/ca.key"))  # the CA key stays off the hosts
     ok = subprocess.run(["openssl", "verify", "-CAfile", str(tls / "ca.pem"),
@@ -162,6 +186,12 @@ BAD = [
     ('namespace = "a"\n[base\nhost = "b"\n', "not valid TOML"),
     ('namespace = "a b"\n[base]\nhost = "b"\n[[robots]]\nid = 0\nhost = "r"\n',
      ":1: namespace:"),
+    ('namespace = "a"\n[base]\nhost = "b"\nworld = "hardware"\n[[robots]]\nid = 0\n'
+     'host = "r"\n', ':4: base.world: world = "hardware" needs a top-level epoch'),
+    ('namespace = "a"\nepoch = 1\n[base]\nhost = "b"\nworld = "hardware"\nlocalizer = false\n'
+     '[[robots]]\nid = 0\nhost = "r"\n', ':6: base.localizer: world = "hardware" needs the'),
+    ('namespace = "a"\n[base]\nhost = "b"\n[[robots]]\nid = 0\nhost = "r"\nport = "ttyUSB0"\n',
+     ":7: robots[0].port: must be an absolute path"),
 ]
 
 

@@ -105,13 +105,16 @@ class Team:
                   tls / "base.key", Fleet.common_name(None),
                   (site.base_addr, site.mgmt_addr, "localhost", "127.0.0.1"))
         router = self.write("router", router_config(fleet))
-        base = self.write("base", client_config(fleet, None))
+        world, recorder = (self.write(role, client_config(fleet, role))
+                           for role in ("world", "recorder"))
         b = site.base_ns
         self.procs["router"] = site.start(b, "router", ["router", "--zenoh-config", router])
-        self.session = self._observe(client_config(fleet, None, host=site.mgmt_addr))
+        # the operator's laptop hears what the recorder does (and may put nothing)
+        self.session = self._observe(client_config(fleet, "recorder", host=site.mgmt_addr))
         common = ["--ns", self.ns]
         self.procs["recorder"] = site.start(b, "recorder", ["record", "--out", str(self.dir),
-                                                            "--zenoh-config", base, *common])
+                                                            "--zenoh-config", recorder,
+                                                            *common])
         for i in range(ROBOTS):
             conf = self.write(f"agent{i}", client_config(fleet, fleet.robot(i),
                                                          host=site.base_addr))
@@ -120,7 +123,7 @@ class Team:
                 ["agent", "--id", str(i), "--robots", str(ROBOTS), *AGENT_ARGS,
                  "--zenoh-config", conf, *common])
         self.procs["world"] = site.start(b, "world", ["world", "--robots", str(ROBOTS),
-                                                      *WORLD_ARGS, "--zenoh-config", base,
+                                                      *WORLD_ARGS, "--zenoh-config", world,
                                                       *common])
 
     def _observe(self, conf: dict) -> zenoh.Session:
