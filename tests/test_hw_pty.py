@@ -16,20 +16,8 @@ from hwbridge.create_driver import CreateDriver
 from hwbridge.emulators.pty import CreateEmulator, Faults, LmsEmulator
 from hwbridge.lms_driver import LmsDriver
 from hwbridge.transport import PortError, SerialTransport
+from tests.hwdrive import pump
 from tests.procutil import wait_for
-
-
-def pump(driver: CreateDriver | LmsDriver, cond, timeout: float, what: str) -> list:
-    """Poll the driver until ``cond()``; returns what LmsDriver.poll produced."""
-    got: list = []
-    deadline = time.monotonic() + timeout
-    while not cond():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
-        out = driver.poll(time.monotonic())
-        if out:
-            got += out
-    return got
 
 
 @pytest.fixture

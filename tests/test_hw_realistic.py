@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -19,22 +18,8 @@ from hwbridge.emulators.devices import PowerPlan
 from hwbridge.emulators.pty import CreateEmulator, LmsEmulator
 from hwbridge.lms import codec as lms
 from hwbridge.lms_driver import LmsDriver
+from tests.hwdrive import pump
 from tests.procutil import wait_for
-
-
-def pump(driver: CreateDriver | LmsDriver, cond: Callable[[], bool], timeout: float,
-         what: str) -> list:
-    """Poll the driver until ``cond()``; returns what LmsDriver.poll produced."""
-    got: list = []
-    deadline = time.monotonic() + timeout
-    while not cond():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
-        out = driver.poll(time.monotonic())
-        if out:
-            got += out
-    return got
-
 
 # --- Create: the start burst is resent until the stream flows -----------------------
 
