@@ -119,16 +119,13 @@ def neighbour_problem(s: AgentState, me: int, side: str, mine: dict[int, Claim],
         if abs(shared - kept) <= TOL_M:
             return None  # it kept the boundary: it had not heard us in time
         theirs = SegmentView(before.lo, before.hi, before.workload)
-        spans = []
-        for k in sorted(ks):
+        for k in sorted(ks):  # the reach from our latest claim is the one reported
             c = mine[k]
             ours = SegmentView(c.lo, c.hi, c.workload)
             low, high = (boundary_reach(theirs, ours, min_segment_m) if lower
                          else boundary_reach(ours, theirs, min_segment_m))
             if low - TOL_M <= shared <= high + TOL_M:
                 return None
-            spans.append((low, high))
-        low, high = spans[-1]
         return (f"the boundary it shares with us is at {shared:.6g} m; from its state of "
                 f"tick {s.k - 1} and ours the law can put it only in [{low:.6g}, {high:.6g}] m")
     edge_end = s.edge_hi if lower else s.edge_lo

@@ -34,7 +34,7 @@ from wire import AgentState, Cmd, DecodeError, Keys, Pose, Sense, decode, encode
 from wire.session import add_session_args, declare_publisher, open_session, options_from_args
 
 DEFAULT_LEASE_S = 1.0  # lease an agent announces unless told otherwise
-EARLY_STATES = 256  # neighbour states kept before our first sensing, at most
+PARKED_STATES = 256  # neighbour states kept for ticks we have no sensing of yet, at most
 MEMBERS_TIMEOUT_S = 2.0  # how long the start-up question "who is alive?" may take
 
 
@@ -87,13 +87,13 @@ class AgentNode:
         self.rejected = 0
         self.ticks = 0
         # What a neighbour's state is judged by (agent.plausible): the edge and limits, set
-        # from the first Sense; states heard before it wait in ``early``; our newest tick;
-        # our own recent claims by tick.
+        # from the first Sense; our newest tick; our own recent claims by tick; and the
+        # states of ticks we have no sensing of yet (all of them before the first Sense),
+        # by (robot, k), waiting to be judged.
         self.bounds: plausible.Bounds | None = None
-        self.early: list[tuple[str, AgentState]] = []
         self.newest_k = -1
         self.claims: dict[int, plausible.Claim] = {}
-        self.parked: dict[tuple[int, int], tuple[str, AgentState]] = {}  # (robot, k): ahead
+        self.parked: dict[tuple[int, int], tuple[str, AgentState]] = {}
         self.controller: Controller | None = None
         self.stopping = False
         self.pub_state = declare_publisher(session, keys.state(robot))
@@ -137,9 +137,16 @@ class AgentNode:
 
     def _drop(self, key: str, why: str) -> None:
         self.dropped += 1
-        if self.dropped <= 20 or self.dropped % 1000 == 0:
-            print(f"agent {self.robot}: dropped message #{self.dropped} on {key}: {why}",
-                  file=sys.stderr, flush=True)
+        self._log_some(self.dropped, f"dropped message #{self.dropped} on {key}: {why}")
+
+    def _reject(self, key: str, why: str) -> None:
+        self.rejected += 1
+        self._log_some(self.rejected, f"refused state #{self.rejected} on {key}: {why}")
+
+    def _log_some(self, count: int, line: str) -> None:
+        """The first 20 of a kind, then every thousandth: a flood cannot fill the log."""
+        if count <= 20 or count % 1000 == 0:
+            print(f"agent {self.robot}: {line}", file=sys.stderr, flush=True)
 
     def _follow_neighbours(self) -> None:
         """Subscribe to exactly the current neighbours' state keys."""
@@ -167,12 +174,10 @@ class AgentNode:
                 self._prune(self.senses)
                 if msg.k > self.newest_k:
                     self.newest_k = msg.k
-                    self._unpark()
-                if self.bounds is None:
-                    self.bounds = self._bounds(msg)
-                    early, self.early = self.early, []
-                    for early_key, early_state in early:
-                        self._judge(early_key, early_state)
+                    first = self.bounds is None
+                    if first:  # now states can be judged: every one parked so far is
+                        self.bounds = self._bounds(msg)
+                    self._unpark(every=first)
                 if msg.pose:  # the robot's pose came with its sensing
                     x, y, theta = msg.pose
                     self.poses[msg.k] = Pose(msg.t, msg.k, msg.robot, x, y, theta,
@@ -196,21 +201,18 @@ class AgentNode:
         """A neighbour's well-formed state: kept if plausible (agent.plausible), else
         counted, logged and dropped, as if it never came: the tick waits for the real one
         as for a late state (a refused copy must not let it act without the real one)."""
-        if self.bounds is None:  # no sensing yet, so no edge or clock to judge it by
-            if len(self.early) < EARLY_STATES:
-                self.early.append((key, state))
-            return
-        why = plausible.state_problem(state, self.bounds, self.newest_k)
-        if why is not None:
-            self._reject(key, why)
-            return
+        if self.bounds is not None:  # before any sensing: no edge or clock to judge by
+            why = plausible.state_problem(state, self.bounds, self.newest_k)
+            if why is not None:
+                self._reject(key, why)
+                return
         if state.k > self.newest_k:
             # A state of a tick whose sensing we do not have yet waits here until we do
             # (a later copy replaces it: the real one comes after a forgery sent ahead of
             # time) and is judged then, against its sender's previous state: a state sent
             # early cannot stand in for the real one when the tick comes. Nothing acts on
             # a neighbour's state of tick k before our own tick k+1.
-            if (state.robot, state.k) in self.parked or len(self.parked) < EARLY_STATES:
+            if (state.robot, state.k) in self.parked or len(self.parked) < PARKED_STATES:
                 self.parked[(state.robot, state.k)] = (key, state)
             return
         lower, upper = self.membership.neighbours()
@@ -224,18 +226,13 @@ class AgentNode:
                 return
         self.membership.heard(state.robot, state.k, state)
 
-    def _unpark(self) -> None:
-        """Judge the states parked for ticks we have now come near, in tick order."""
-        due = sorted(rk for rk in self.parked if rk[1] <= self.newest_k)
+    def _unpark(self, every: bool = False) -> None:
+        """Judge the states parked for ticks we now have sensing of (``every``: all of
+        them, at the first Sense; those still ahead are parked again), in tick order."""
+        due = sorted(rk for rk in self.parked if every or rk[1] <= self.newest_k)
         for rk in due:
             key, state = self.parked.pop(rk)
             self._judge(key, state)
-
-    def _reject(self, key: str, why: str) -> None:
-        self.rejected += 1
-        if self.rejected <= 20 or self.rejected % 1000 == 0:
-            print(f"agent {self.robot}: refused state #{self.rejected} on {key}: {why}",
-                  file=sys.stderr, flush=True)
 
     def _bounds(self, sense: Sense) -> plausible.Bounds:
         p = self.patrol_cfg

@@ -292,9 +292,9 @@ def hil_refusal(args: argparse.Namespace) -> str | None:
 
 def refusal(args: argparse.Namespace, bodies: int) -> str | None:
     """Why the run cannot go as asked, before any process starts; None if it can.
-    ``bodies`` is the team plus every id that joins."""
-    if not 1 <= args.robots <= MAX_ROBOTS:
-        return f"--robots must be between 1 and {MAX_ROBOTS}, not {args.robots}"
+    ``bodies`` is the team plus every id that joins (``run`` has checked the team)."""
+    if bodies > MAX_ROBOTS:
+        return f"the team and the ids that join are {bodies} robots; at most {MAX_ROBOTS}"
     if args.port is not None and not 1 <= args.port <= 65535:
         return f"--port must be between 1 and 65535, not {args.port}"
     if not (math.isfinite(args.duration) and args.duration > 0):
@@ -472,7 +472,8 @@ def _watch(args: argparse.Namespace, group: ProcessGroup, monitor: Monitor, worl
                 print(("\n" if tty else "") + "btrack sim: " + line, flush=True)
         if world.proc.poll() is not None:
             break
-        if not recorder.alive() and recorder.proc.returncode == 0 and _finished(recorder):
+        if (not recorder.alive() and recorder.proc.returncode == 0
+                and recorder.last_json().get("done")):
             continue  # the recorder ends by itself once it has the final tick
         dead = injector.unexpected_exit() or (None if recorder.alive() else recorder) or next(
             (c for c in vital if not c.alive()), None)
@@ -519,11 +520,7 @@ def _wait_for_recorder(recorder: Child, monitor: Monitor) -> None:
 def _recording_missing(recorder: Child, total: int) -> str:
     """What the recording lacks of a run of ``total`` ticks, from the recorder's own
     count; "" if nothing."""
-    try:
-        lines = recorder.stdout_path.read_text().strip().splitlines()
-        counts = json.loads(lines[-1]) if lines else {}
-    except (OSError, ValueError):
-        counts = {}
+    counts = recorder.last_json()
     if not counts:
         return f"the recorder gave no count (exit code {recorder.proc.returncode})"
     ticks = int(counts.get("ticks", 0))
@@ -531,15 +528,6 @@ def _recording_missing(recorder: Child, total: int) -> str:
         return (f"it holds {ticks} of the run's {total} ticks"
                 + ("" if counts.get("done") else ", not the final one"))
     return ""
-
-
-def _finished(recorder: Child) -> bool:
-    """Whether the recorder, having exited, said it recorded the run's final tick."""
-    try:
-        lines = recorder.stdout_path.read_text().strip().splitlines()
-        return bool(lines) and bool(json.loads(lines[-1]).get("done"))
-    except (OSError, ValueError, AttributeError):
-        return False
 
 
 def main(argv: list[str] | None = None) -> int:

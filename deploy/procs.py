@@ -16,6 +16,7 @@ import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 
 class Terminated(KeyboardInterrupt):
@@ -110,6 +111,16 @@ class Child:
 
     def alive(self) -> bool:
         return self.proc.poll() is None
+
+    def last_json(self) -> dict[str, Any]:
+        """The last line the process printed, as the JSON object of counts every btrack
+        process ends with; {} if there is none (yet)."""
+        try:
+            lines = self.stdout_path.read_text().strip().splitlines()
+            value = json.loads(lines[-1]) if lines else {}
+        except (OSError, ValueError):
+            return {}
+        return value if isinstance(value, dict) else {}
 
     def log_tail(self, lines: int = 15) -> str:
         try:

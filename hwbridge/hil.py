@@ -40,14 +40,6 @@ DEFAULT_FAULTS = 0.005  # one device message in 200 damaged on purpose
 NEIGHBOUR_TIMEOUT_S = 0.3
 
 
-def _last_json(child: Child) -> dict[str, Any]:
-    try:
-        lines = child.stdout_path.read_text().strip().splitlines()
-        return json.loads(lines[-1]) if lines else {}
-    except (OSError, json.JSONDecodeError):
-        return {}
-
-
 def _fail(group: ProcessGroup, child: Child, what: str) -> int:
     print(f"\nbtrack sim --hil: {child.name} {what} (exit code {child.proc.returncode}); "
           f"its log {child.log_path}:\n{child.log_tail()}", file=sys.stderr)
@@ -154,7 +146,7 @@ def run(args: argparse.Namespace) -> int:
                 str(NEIGHBOUR_TIMEOUT_S), *forward_flags(args, AGENT_FLAGS), *member])
                 for i in range(n)]
             last_print = time.monotonic()
-            while world.alive() and not _last_json(world):
+            while world.alive() and not world.last_json():
                 try:
                     world.proc.wait(0.5)
                 except Exception:

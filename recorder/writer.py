@@ -18,6 +18,7 @@ from mcap.writer import CompressionType, Writer
 from agent import plausible
 from recorder import topics
 from wire.codec import DecodeError, decode
+from wire.keys import Keys
 from wire.messages import AgentState, Progress, Tick, WorldInfo
 
 _dumps = json.JSONEncoder(separators=(",", ":"), allow_nan=False).encode
@@ -65,7 +66,7 @@ class RunWriter:
             self._stream.close()
 
 
-RECENT_TICKS = 8
+RECENT_TICKS = 8  # each robot's states kept, by tick, for progress
 REALTIME_END_SLACK_TICKS = 10
 # The recorder hears the world's ticks and the agents' states on different links, and
 # under load one link can be read seconds behind another: only a tick this far from the
@@ -73,13 +74,6 @@ REALTIME_END_SLACK_TICKS = 10
 RECORDER_WINDOW_TICKS = 10_000
 DEPTH_SLACK_M = 1.0  # an agent's depth may be this much deeper than the true deepest
 
-
-def _robot_of(topic: str) -> int | None:
-    """The robot id of ``alive/agent/ID``, None for another topic."""
-    if not topic.startswith(topics.ALIVE_PREFIX):
-        return None
-    rest = topic[len(topics.ALIVE_PREFIX):]
-    return int(rest) if rest.isdigit() else None  # each robot's states kept, by tick, for progress
 
 
 class Recording:
@@ -92,6 +86,7 @@ class Recording:
         self.rejected = 0  # well formed but implausible: recorded under rejected/
         self.ticks = 0  # Ticks recorded
         self.info: WorldInfo | None = None  # the run's first WorldInfo
+        self._state_bounds: plausible.Bounds | None = None  # what states are judged by
         self.last_tick: Tick | None = None
         self.done = False  # a Tick with done=True has been written
         self.last_t_ns = 0  # the latest simulation time seen, for messages without one
@@ -154,6 +149,9 @@ class Recording:
         if isinstance(msg, WorldInfo):
             if self.info is None:
                 self.info = msg
+                deepest = max(msg.patrol_depth, default=0.0) + DEPTH_SLACK_M
+                self._state_bounds = plausible.Bounds(msg.edge_lo, msg.edge_hi, deepest,
+                                                      msg.bin_m, plausible.NO_PASS_LIMIT)
             elif (msg.edge_lo, msg.edge_hi, msg.dt) != (
                     self.info.edge_lo, self.info.edge_hi, self.info.dt):
                 return "a second world with another edge or tick"
@@ -172,13 +170,10 @@ class Recording:
                 if msg.done and msg.k < final - slack:
                     return f"done at tick {msg.k}; the run's last tick is {final}"
             return None
-        if isinstance(msg, AgentState) and info is not None:
-            deepest = max(info.patrol_depth, default=0.0) + DEPTH_SLACK_M
-            bounds = plausible.Bounds(info.edge_lo, info.edge_hi, deepest, info.bin_m,
-                                      plausible.NO_PASS_LIMIT)
+        if isinstance(msg, AgentState) and self._state_bounds is not None:
             newest = self.last_tick.k if self.last_tick else None
-            return plausible.state_problem(msg, bounds, newest, RECORDER_WINDOW_TICKS,
-                                           RECORDER_WINDOW_TICKS)
+            return plausible.state_problem(msg, self._state_bounds, newest,
+                                           RECORDER_WINDOW_TICKS, RECORDER_WINDOW_TICKS)
         return None
 
     def _note_tick(self, tick: Tick) -> None:
@@ -219,7 +214,7 @@ class Recording:
     def handle_alive(self, topic: str, alive: bool, log_ns: int) -> None:
         """Record a liveliness token appearing or going away on ``topic``; one of a
         robot the world does not have is recorded as rejected."""
-        robot = _robot_of(topic)
+        robot = Keys.robot_of(topic)
         if (robot is not None and self.info is not None and not 0 <= robot < self.info.robots
                 and alive):
             self.record_invalid(topic, f"no robot {robot} in this run (0..{self.info.robots - 1})",

@@ -263,6 +263,7 @@ class WorldProcess:
                 self._drop(key, f"robot {cmd.robot} on this key")
                 return None
             self.mute.discard(cmd.robot)
+            self.silent.discard(cmd.robot)
             return cmd
         if kind == _ALIVE:
             robot = Keys.robot_of(key)
@@ -404,8 +405,6 @@ class WorldProcess:
                                     "not waited for until they do", sorted(never))
                     break
                 cmd = self._handle(item)
-                if cmd is not None:
-                    self.silent.discard(cmd.robot)
                 if cmd is not None and cmd.k == k:
                     cmds[cmd.robot] = (cmd.v, cmd.omega)
                     pending.discard(cmd.robot)

@@ -10,7 +10,8 @@ import sys
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import zenoh
@@ -19,6 +20,21 @@ from mcap.reader import make_reader
 from tests.procutil import end, free_port, unique_ns
 from wire import AgentState, Keys, Progress, Tick, Truth, WorldInfo, decode, encode
 from wire.session import SessionOptions, open_session
+
+
+@contextmanager
+def recorder_on_bus(out: Path) -> Iterator[tuple[subprocess.Popen[bytes], Keys, zenoh.Session]]:
+    """A real recorder writing OUT/run.mcap on a private namespace, and a test session
+    on its bus once the recorder is alive; the recorder is ended whatever happens."""
+    ns, port = unique_ns(), free_port()
+    keys = Keys(ns)
+    proc = start_recorder(out, ns, port)
+    try:
+        with bus_session(ns, port) as session:
+            wait_recorder_alive(session, keys)
+            yield proc, keys, session
+    finally:
+        end(proc)
 
 
 def start_recorder(out: Path, ns: str, port: int) -> subprocess.Popen[bytes]:
@@ -109,83 +125,69 @@ def state(k: int) -> AgentState:
 
 
 def test_recorder_records_and_stops_on_final_tick(tmp_path: Path) -> None:
-    ns, port = unique_ns(), free_port()
-    keys = Keys(ns)
-    proc = start_recorder(tmp_path, ns, port)
-    try:
-        with bus_session(ns, port) as session:
-            wait_recorder_alive(session, keys)
-            token = session.liveliness().declare_token(keys.alive(0))
-            info = WorldInfo(
-                map="no-algae",
-                start="in-phase",
-                robots=1,
-                localization="truth",
-                seed=1,
-                duration_s=0.4,
-                dt=0.1,
-                edge_lo=0.0,
-                edge_hi=6.0,
-                bin_m=0.1,
-                patrol_depth=[0.3] * 60,
-                robot_radius=0.17,
-                min_depth=0.3,
-                margin_out=0.3,
-            )
-            session.put(keys.world_info(), encode(info))
-            for k in range(3):
-                session.put(keys.truth(), encode(Truth(k * 0.1, k, [0], [1.0], [-1.0], [0.0])))
-                session.put(keys.state(0), encode(state(k)))
-                session.put(keys.world_tick(), encode(Tick(k * 0.1, k, [0])))
-            # asked how far the run has got, it answers from what it recorded
-            progress = ask_progress(session, keys, lambda p: p.k == 2)
-            assert (progress.t, progress.live, progress.done) == (0.2, [0], False)
-            assert (progress.robots, progress.phase, progress.workload) == ([0], [0.5], [0.6])
-            session.put(keys.state(0), b"\x93\x01\x02")  # a msgpack list, not a state
-            session.put(keys.world_tick(), encode(Tick(0.3, 3, [0], done=True)))
-            out, err = proc.communicate(timeout=30)
-            token.undeclare()
-        assert proc.returncode == 0, err.decode()
-        summary = json.loads(out.decode().strip().splitlines()[-1])
-        assert summary == {"messages": 12, "invalid": 1, "rejected": 0, "done": True,
-                           "ticks": 4, "last_k": 3}
-        counts, data = read_topics(tmp_path / "run.mcap")
-        assert counts["world/info"] == 1
-        assert counts["world/truth"] == 3
-        assert data["world/truth"][1] == {"t": 0.1, "k": 1, "robots": [0], "x": [1.0],
-                                          "y": [-1.0], "theta": [0.0]}
-        assert counts["agent/0/state"] == 3
-        assert counts["world/tick"] == 4
-        assert counts["invalid/agent/0/state"] == 1
-        assert data["invalid/agent/0/state"][0]["hex"] == "93 01 02".replace(" ", "")
-        assert data["alive/agent/0"] == [{"alive": True}]
-        assert data["world/tick"][-1]["done"] is True
-        assert data["agent/0/state"][2]["k"] == 2
-    finally:
-        end(proc)
+    with recorder_on_bus(tmp_path) as (proc, keys, session):
+        token = session.liveliness().declare_token(keys.alive(0))
+        info = WorldInfo(
+            map="no-algae",
+            start="in-phase",
+            robots=1,
+            localization="truth",
+            seed=1,
+            duration_s=0.4,
+            dt=0.1,
+            edge_lo=0.0,
+            edge_hi=6.0,
+            bin_m=0.1,
+            patrol_depth=[0.3] * 60,
+            robot_radius=0.17,
+            min_depth=0.3,
+            margin_out=0.3,
+        )
+        session.put(keys.world_info(), encode(info))
+        for k in range(3):
+            session.put(keys.truth(), encode(Truth(k * 0.1, k, [0], [1.0], [-1.0], [0.0])))
+            session.put(keys.state(0), encode(state(k)))
+            session.put(keys.world_tick(), encode(Tick(k * 0.1, k, [0])))
+        # asked how far the run has got, it answers from what it recorded
+        progress = ask_progress(session, keys, lambda p: p.k == 2)
+        assert (progress.t, progress.live, progress.done) == (0.2, [0], False)
+        assert (progress.robots, progress.phase, progress.workload) == ([0], [0.5], [0.6])
+        session.put(keys.state(0), b"\x93\x01\x02")  # a msgpack list, not a state
+        session.put(keys.world_tick(), encode(Tick(0.3, 3, [0], done=True)))
+        out, err = proc.communicate(timeout=30)
+        token.undeclare()
+    assert proc.returncode == 0, err.decode()
+    summary = json.loads(out.decode().strip().splitlines()[-1])
+    assert summary == {"messages": 12, "invalid": 1, "rejected": 0, "done": True,
+                       "ticks": 4, "last_k": 3}
+    counts, data = read_topics(tmp_path / "run.mcap")
+    assert counts["world/info"] == 1
+    assert counts["world/truth"] == 3
+    assert data["world/truth"][1] == {"t": 0.1, "k": 1, "robots": [0], "x": [1.0],
+                                      "y": [-1.0], "theta": [0.0]}
+    assert counts["agent/0/state"] == 3
+    assert counts["world/tick"] == 4
+    assert counts["invalid/agent/0/state"] == 1
+    assert data["invalid/agent/0/state"][0]["hex"] == "93 01 02".replace(" ", "")
+    assert data["alive/agent/0"] == [{"alive": True}]
+    assert data["world/tick"][-1]["done"] is True
+    assert data["agent/0/state"][2]["k"] == 2
 
 
 def test_recorder_finishes_the_file_on_sigterm(tmp_path: Path) -> None:
-    ns, port = unique_ns(), free_port()
-    keys = Keys(ns)
-    proc = start_recorder(tmp_path, ns, port)
-    try:
-        with bus_session(ns, port) as session:
-            wait_recorder_alive(session, keys)
-            session.put(keys.world_tick(), encode(Tick(0.0, 0, [])))
-            session.put(keys.world_tick(), b"garbage")
-            session.put(keys.world_tick(), encode(Tick(0.1, 1, [])))
-            proc.send_signal(signal.SIGTERM)
-            out, err = proc.communicate(timeout=30)
-        assert proc.returncode == 0, err.decode()
-        summary = json.loads(out.decode().strip().splitlines()[-1])
-        # whatever arrived before the signal is in a finished, readable file
-        counts, _ = read_topics(tmp_path / "run.mcap")
-        assert counts["world/tick"] == summary["messages"]
-        assert counts["invalid/world/tick"] == summary["invalid"]
-        assert summary["done"] is False  # stopped before the final tick
-    finally:
-        end(proc)
+    with recorder_on_bus(tmp_path) as (proc, keys, session):
+        session.put(keys.world_tick(), encode(Tick(0.0, 0, [])))
+        session.put(keys.world_tick(), b"garbage")
+        session.put(keys.world_tick(), encode(Tick(0.1, 1, [])))
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 0, err.decode()
+    summary = json.loads(out.decode().strip().splitlines()[-1])
+    # whatever arrived before the signal is in a finished, readable file
+    counts, _ = read_topics(tmp_path / "run.mcap")
+    assert counts["world/tick"] == summary["messages"]
+    assert counts["invalid/world/tick"] == summary["invalid"]
+    assert summary["done"] is False  # stopped before the final tick
 
 
 def test_a_sigkilled_recorders_file_is_reported_as_cut_short(tmp_path: Path) -> None:
@@ -194,37 +196,30 @@ def test_a_sigkilled_recorders_file_is_reported_as_cut_short(tmp_path: Path) -> 
     read such a file at all)."""
     from report.synthetic import synthetic_messages
 
-    ns, port = unique_ns(), free_port()
-    keys = Keys(ns)
-    proc = start_recorder(tmp_path, ns, port)
-    try:
-        with bus_session(ns, port) as session:
-            wait_recorder_alive(session, keys)
-            sent_k = 0
-            for topic, payload, _ in synthetic_messages(duration_s=300.0):
-                session.put(f"{ns}/{topic}", payload)
-                if topic == "world/tick":
-                    sent_k += 1
-                    if sent_k == 2000:  # of 3001: the run is two thirds through
-                        break
-            ask_progress(session, keys, lambda p: p.k >= 1999)
-            proc.send_signal(signal.SIGKILL)
-            proc.wait(timeout=30)
-        done = subprocess.run([sys.executable, "-m", "btrack", "report", str(tmp_path)],
-                              capture_output=True, text=True, timeout=120)
-        assert done.returncode == 0, done.stderr
-        assert "the recording is incomplete" in done.stderr and "Traceback" not in done.stderr
-        summary = json.loads((tmp_path / "summary.json").read_text())
-        assert summary["recording_complete"] is False
-        assert "no summary (its recorder did not finish it)" in summary["recording_note"]
-        assert summary["ticks_expected"] == 3000
-        # what was flushed to the file before the kill: whole chunks, most of the run
-        assert 500 < summary["ticks"] < 2000
-        assert f"{summary['ticks']} of the run's 3000 ticks recorded" in summary["recording_note"]
-        assert summary["phase_sse_rad"] is not None
-        assert "**This recording is incomplete**" in (tmp_path / "report.md").read_text()
-    finally:
-        end(proc)
+    with recorder_on_bus(tmp_path) as (proc, keys, session):
+        sent_k = 0
+        for topic, payload, _ in synthetic_messages(duration_s=300.0):
+            session.put(f"{keys.ns}/{topic}", payload)
+            if topic == "world/tick":
+                sent_k += 1
+                if sent_k == 2000:  # of 3001: the run is two thirds through
+                    break
+        ask_progress(session, keys, lambda p: p.k >= 1999)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=30)
+    done = subprocess.run([sys.executable, "-m", "btrack", "report", str(tmp_path)],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "the recording is incomplete" in done.stderr and "Traceback" not in done.stderr
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["recording_complete"] is False
+    assert "no summary (its recorder did not finish it)" in summary["recording_note"]
+    assert summary["ticks_expected"] == 3000
+    # what was flushed to the file before the kill: whole chunks, most of the run
+    assert 500 < summary["ticks"] < 2000
+    assert f"{summary['ticks']} of the run's 3000 ticks recorded" in summary["recording_note"]
+    assert summary["phase_sse_rad"] is not None
+    assert "**This recording is incomplete**" in (tmp_path / "report.md").read_text()
 
 
 def test_the_launcher_says_what_a_recording_lacks(tmp_path: Path) -> None:
