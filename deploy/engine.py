@@ -2,12 +2,14 @@
 
 The world core (``simworld.world.World``) and one ``agent.controller.Controller`` per
 robot, stepped in lockstep the way the bus runs them: at tick k every agent gets its
-robot's sensing and pose (the simulator's truth, or its dead reckoning with
-``localization="odometry"``) and its neighbours' states of tick k-1, then the world
-steps with every command. It is the run ``btrack sim`` makes with the same case, seed
-and pose source, bit for bit (a test compares the tracks); only the bus's timeouts
-under load could make a bus run differ. No processes, no bus, no clock: a 3-robot
-1200 s case takes about a second.
+robot's sensing and pose (the simulator's truth, its dead reckoning with
+``localization="odometry"``, or with ``localization="pf"`` the localizer core's
+estimate from the row of scanners' scans of tick k and every robot's odometry) and its
+neighbours' states of tick k-1, then the world steps with every command. It is the
+run ``btrack sim`` makes with the same case, seed and pose source, bit for bit (a test
+compares the tracks); only the bus's timeouts under load could make a bus run differ.
+No processes, no bus, no clock: a 3-robot 1200 s case takes about a second with truth
+poses.
 """
 
 from __future__ import annotations
@@ -21,7 +23,8 @@ from agent import config as agent_config
 from agent.controller import Controller, Neighbour, initial_segment
 from report.measures import EdgeModel, team_measures
 from simworld.maps import GridMap, load_map
-from simworld.world import ODOM_NOISE, ROBOT_RADIUS_M, World
+from simworld.world import ODOM_NOISE, ROBOT_RADIUS_M, Reading, World
+from wire import Scan
 
 DT_S = 0.1  # the world's tick at 10 Hz control
 
@@ -36,11 +39,12 @@ class EngineCase:
     duration_s: float = 1200.0
     seed: int = 1
     overrides: dict[str, dict[str, Any]] = field(default_factory=dict)
-    localization: str = "truth"  # or "odometry": the agents steer by dead reckoning
+    localization: str = "truth"  # "odometry": dead reckoning; "pf": the localizer's
     odom_noise: float = ODOM_NOISE
     odom_turn_noise: float | None = None  # None: as odom_noise (the world's default)
     scale: float = 0.05  # metres per pixel of a PNG map
     config: str | None = None  # an agent configuration file (TOML), under the overrides
+    scanners: int = 0  # with pf: scanners in the row, 0 for one per 10 m of edge
 
 
 @dataclass
@@ -57,12 +61,13 @@ class Tracks:
     phase: np.ndarray  # the phase the agent computed (eq. 3.1 from its own pose)
     workload: np.ndarray  # the workload the agent believed
     cycle_s: np.ndarray  # the team cycle the agent used
+    pose_error: np.ndarray  # how far the pose the agent steered by was from the truth, m
 
 
 def run(case: EngineCase, gmap: GridMap | None = None) -> tuple[GridMap, Tracks]:
     """Run one case in lockstep; the map and every robot's tracks."""
-    if case.localization not in ("truth", "odometry"):
-        raise ValueError(f"the in-process engine takes truth or odometry poses, not "
+    if case.localization not in ("truth", "odometry", "pf"):
+        raise ValueError(f"the in-process engine takes truth, odometry or pf poses, not "
                          f"{case.localization!r}")
     gains, patrol, limits = agent_config.load(case.config, case.overrides)
     gmap = gmap or load_map(case.map, case.scale, seed=case.seed)
@@ -71,16 +76,25 @@ def run(case: EngineCase, gmap: GridMap | None = None) -> tuple[GridMap, Tracks]
                   odom_turn_noise=case.odom_turn_noise)
     odometry = case.localization == "odometry"
     lo_e, hi_e = gmap.edge_lo, gmap.edge_hi
+    localizer = _Localization(gmap, n, case) if case.localization == "pf" else None
     ticks = int(round(case.duration_s / DT_S))
-    arrays = [np.zeros((n, ticks)) for _ in range(8)]
-    x, y, lo, hi, direction, seen_phase, seen_work, cycle = arrays
+    arrays = [np.zeros((n, ticks)) for _ in range(9)]
+    x, y, lo, hi, direction, seen_phase, seen_work, cycle, pose_error = arrays
     controllers: list[Controller] = []
     published: list[Neighbour | None] = [None] * n  # each agent's state of tick k-1
     for k in range(ticks):
         cmds, now = {}, []
+        if localizer is not None:  # the world scans before it senses, as on the bus
+            scans = localizer.scan(world)
+        readings = [world.sense(i) for i in range(n)]
+        if localizer is not None:
+            poses = localizer.poses(scans, readings)
         for i in range(n):
-            reading = world.sense(i)
-            px, py, pth = world.odometry_pose(i) if odometry else world.truth(i)
+            reading = readings[i]
+            if localizer is not None:
+                px, py, pth = poses[i]
+            else:
+                px, py, pth = world.odometry_pose(i) if odometry else world.truth(i)
             if k == 0:
                 seg = initial_segment(i, n, lo_e, hi_e)
                 controllers.append(Controller(i, *seg, lo_e, hi_e, px, gains, patrol, limits))
@@ -96,10 +110,49 @@ def run(case: EngineCase, gmap: GridMap | None = None) -> tuple[GridMap, Tracks]
             lo[i, k], hi[i, k], direction[i, k] = out.lo, out.hi, out.direction
             seen_phase[i, k], seen_work[i, k] = out.phase, out.workload
             cycle[i, k] = out.cycle_s
+            pose_error[i, k] = np.hypot(px - x[i, k], py - y[i, k])
         published = list(now)
         world.step(cmds, DT_S)
     t = np.arange(ticks) * DT_S
-    return gmap, Tracks(t, x, y, lo, hi, direction, seen_phase, seen_work, cycle)
+    return gmap, Tracks(t, x, y, lo, hi, direction, seen_phase, seen_work, cycle,
+                        pose_error)
+
+
+class _Localization:
+    """What ``btrack world --localization pf`` and ``btrack localizer`` do each tick:
+    the row of scanners' scans of the true poses, then one filter step on them and the
+    robots' odometry; the same seeds and defaults as the processes'."""
+
+    def __init__(self, gmap: GridMap, n: int, case: EngineCase) -> None:
+        from localizer.core import FilterConfig, Localizer
+        from simworld.laser import RANGE_NOISE_M, Laser, scanner_row
+        from simworld.maps import LASER_ROOM_M, ROBOT_ROOM_M
+
+        y = -(ROBOT_ROOM_M + LASER_ROOM_M)
+        row = scanner_row(gmap.edge_lo, gmap.edge_hi, y, case.scanners or None)
+        self.lasers = [Laser(s, ROBOT_RADIUS_M, RANGE_NOISE_M, (), case.seed, stream=j)
+                       for j, s in enumerate(row)]
+        self.n = n
+        self.core = Localizer(n, FilterConfig(), seed=case.seed)
+
+    def scan(self, world: World) -> list[Scan]:
+        centres = [world.truth(i)[:2] for i in range(self.n)]
+        out = []
+        for j, laser in enumerate(self.lasers):
+            s = laser.scanner
+            out.append(Scan(0.0, 0, laser.scan(centres), s.x, s.y, s.theta, s.angle_min,
+                            s.angle_step, s.range_max, j, len(self.lasers)))
+        return out
+
+    def poses(self, scans: list[Scan], readings: list[Reading]
+              ) -> list[tuple[float, float, float]]:
+        from localizer.core import ScanGeometry
+
+        dist = np.array([r.odom_dist_m for r in readings])
+        dtheta = np.array([r.odom_dtheta for r in readings])
+        estimates = self.core.step_scans(
+            [(np.asarray(s.ranges), ScanGeometry.of(s)) for s in scans], dist, dtheta)
+        return [(e.x, e.y, e.theta) for e in estimates]
 
 
 def measures(gmap: GridMap, tracks: Tracks) -> dict[str, float]:

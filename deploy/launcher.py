@@ -41,6 +41,7 @@ from deploy.procs import (
 from simworld.maps import MapError, load_map
 from wire import DecodeError, Keys, Progress, Tick, decode, encode
 from wire import Fault as WireFault
+from wire.messages import MAX_SCANNERS
 from wire.session import (
     SessionOptions,
     closed_within,
@@ -77,6 +78,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="where agents' poses come from: pf (the localizer's particle "
                    "filters on laser scans), truth or odometry (default pf; with --hil, "
                    "truth: the hardware loop's world sends the poses)")
+    p.add_argument("--scanners", type=int, metavar="N",
+                   help="with pf: laser scanners in a row behind the team, each watching "
+                   "its share of the edge (default one per 10 m of edge)")
     p.add_argument("--odom-noise", type=non_negative, metavar="F",
                    help="wheel odometry noise: std of each step's distance as a fraction "
                    "of it (the world's default, 0.02)")
@@ -268,7 +272,7 @@ def _fail(group: ProcessGroup, child: Child, what: str) -> int:
 # What the hardware loop (--hil) does not do yet: refused by name there, never ignored.
 HIL_REFUSED = (("fault", "--fault"), ("chaos", "--chaos"), ("kidnap", "--kidnap"),
                ("odom_noise", "--odom-noise"), ("odom_turn_noise", "--odom-turn-noise"),
-               ("progress_every", "--progress-every"))
+               ("progress_every", "--progress-every"), ("scanners", "--scanners"))
 
 
 def hil_refusal(args: argparse.Namespace) -> str | None:
@@ -299,6 +303,10 @@ def refusal(args: argparse.Namespace, bodies: int) -> str | None:
         return f"--port must be between 1 and 65535, not {args.port}"
     if not (math.isfinite(args.duration) and args.duration > 0):
         return f"--duration must be a positive number of seconds, not {args.duration:g}"
+    if args.scanners is not None and not 1 <= args.scanners <= MAX_SCANNERS:
+        return f"--scanners must be between 1 and {MAX_SCANNERS}, not {args.scanners}"
+    if args.scanners is not None and args.localization not in (None, "pf"):
+        return f"--scanners: the laser scans only with --localization pf, not {args.localization}"
     if args.ns is not None:
         try:
             Keys(args.ns)
@@ -428,6 +436,8 @@ def run(args: argparse.Namespace) -> int:
             for spec in args.kidnap:
                 world_args += ["--kidnap", spec]
             world_args += forward_flags(args, ODOM_FLAGS)
+            if args.scanners is not None:
+                world_args += ["--scanners", str(args.scanners)]
             world = group.start("world", world_args)
             code = _watch(args, group, monitor, world, injector, recorder, vital)
             if code:

@@ -40,7 +40,9 @@ numbers come from a seeded numpy Generator owned by the ``Localizer``.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -94,6 +96,12 @@ class ScanGeometry:
     angle_step: float
     range_max: float
     beams: int = 361
+
+    @classmethod
+    def of(cls, scan: Any) -> ScanGeometry:
+        """The geometry a ``wire.Scan`` carries."""
+        return cls(scan.scanner_x, scan.scanner_y, scan.scanner_theta, scan.angle_min,
+                   scan.angle_step, scan.range_max, len(scan.ranges))
 
 
 @dataclass(frozen=True)
@@ -256,6 +264,30 @@ def measure_centres(ranges: np.ndarray, geometry: ScanGeometry,
     return fitted[ok]
 
 
+def merge_centres(per_scan: Sequence[np.ndarray], radius: float) -> np.ndarray:
+    """The centres (m, 2) several scanners measured in one tick, one per robot: a
+    centre less than a robot's radius from one an earlier scanner measured is the same
+    robot (two robots' centres are two radii apart at least), and the two are
+    averaged. One scan's centres are returned as they are."""
+    if len(per_scan) == 1:
+        return per_scan[0]
+    merged: list[np.ndarray] = []
+    counts: list[int] = []
+    for centres in per_scan:
+        first_of_scan = len(merged)  # a scan's own centres are distinct robots
+        for c in centres:
+            near = [j for j in range(first_of_scan)
+                    if float(np.hypot(*(merged[j] - c))) < radius]
+            if near:
+                j = min(near, key=lambda j: float(np.hypot(*(merged[j] - c))))
+                merged[j] = (merged[j] * counts[j] + c) / (counts[j] + 1)
+                counts[j] += 1
+            else:
+                merged.append(np.asarray(c, dtype=float))
+                counts.append(1)
+    return np.array(merged).reshape(-1, 2)
+
+
 def assign(predicted: np.ndarray, candidates: np.ndarray, active: np.ndarray,
            gate_m: float) -> np.ndarray:
     """For each robot, the index of its measured centre, or -1: minimum total squared
@@ -312,14 +344,23 @@ class Localizer:
         self.reseeded = 0  # recoveries so far
 
     # prediction ------------------------------------------------------------------
-    def draw_over_view(self, geometry: ScanGeometry) -> None:
-        """No pose given: particles uniform over the scanner's field of view."""
+    def draw_over_view(self, geometries: Sequence[ScanGeometry]) -> None:
+        """No pose given: particles uniform over the scanners' fields of view, each
+        particle in a scanner's drawn at random."""
         c, shape = self.config, self.x.shape
-        span = geometry.angle_step * (geometry.beams - 1)
-        a = geometry.theta + geometry.angle_min + self.rng.uniform(0.0, span, shape)
-        r = geometry.range_max * np.sqrt(self.rng.uniform(0.0, 1.0, shape))
-        self.x = geometry.x + r * np.cos(a)
-        self.y = geometry.y + r * np.sin(a)
+        if len(geometries) == 1:
+            pick: np.ndarray | int = 0
+        else:
+            pick = self.rng.integers(0, len(geometries), shape)
+
+        def of(name: str) -> np.ndarray:
+            return np.asarray([getattr(g, name) for g in geometries], dtype=float)[pick]
+
+        span = of("angle_step") * (of("beams") - 1)
+        a = of("theta") + of("angle_min") + self.rng.uniform(0.0, 1.0, shape) * span
+        r = of("range_max") * np.sqrt(self.rng.uniform(0.0, 1.0, shape))
+        self.x = of("x") + r * np.cos(a)
+        self.y = of("y") + r * np.sin(a)
         self.theta = self.rng.uniform(-math.pi, math.pi, shape)
         self.w[:] = 1.0 / c.particles
         self.drawn = True
@@ -431,10 +472,19 @@ class Localizer:
              dtheta: np.ndarray) -> list[Estimate]:
         """One scan: predict every robot with its odometry since the last scan, measure
         the centres, assign them, update, recover lost robots; one estimate per robot."""
+        return self.step_scans([(ranges, geometry)], dist, dtheta)
+
+    def step_scans(self, scans: Sequence[tuple[np.ndarray, ScanGeometry]],
+                   dist: np.ndarray, dtheta: np.ndarray) -> list[Estimate]:
+        """``step`` for one tick seen by a row of scanners: the centres of every scan,
+        one per robot where two scanners see the same robot (``merge_centres``)."""
+        if not scans:
+            raise ValueError("a tick needs at least one scan")
         if not self.drawn:
-            self.draw_over_view(geometry)
+            self.draw_over_view([g for _, g in scans])
         self.predict(dist, dtheta)
-        centres = measure_centres(ranges, geometry, self.config)
+        centres = merge_centres([measure_centres(r, g, self.config) for r, g in scans],
+                                self.config.radius_m)
         match = assign(self.mean_positions(), centres, self.started, self.config.gate_m)
         has = match >= 0
         z = np.zeros((self.robots, 2))

@@ -1,9 +1,10 @@
 """``btrack localizer``: laser scans plus each robot's odometry in, one pose per robot
 per scan out (thesis ch. 5, 6.1.5), as its own process.
 
-It hears the scanner (``laser/scan``) and every robot's sensing (``robot/*/sense``,
-for the odometry of the last period). Tick k is processed once scan k and the
-sensing of tick k of every robot are in (or, if a robot's sensing is missing, when a
+It hears the scanners (``laser/scan``: one scan per scanner of the row and tick) and
+every robot's sensing (``robot/*/sense``, for the odometry of the last period). Tick
+k is processed once every scanner's scan k and the sensing of tick k of every robot
+are in (or, if a robot's sensing is missing, when a
 later scan arrives or after ``--sense-timeout`` wall seconds, with no motion for that
 robot); then it publishes ``robot/I/pose`` of tick k for every robot, source ``pf``.
 In lockstep simulation the agents wait for that pose, so the world's clock waits
@@ -65,7 +66,7 @@ class LocalizerNode:
         self.core = Localizer(robots, config, seed=seed)
         self.sense_timeout = sense_timeout
         self.events: queue.SimpleQueue[tuple[str, Any]] = queue.SimpleQueue()
-        self.scans: dict[int, Scan] = {}
+        self.scans: dict[int, dict[int, Scan]] = {}  # tick -> scanner -> its scan
         self.senses: dict[int, dict[int, Sense]] = {}
         self.first_seen: dict[int, float] = {}
         self.last_k = -1
@@ -102,7 +103,12 @@ class LocalizerNode:
             if kind == "scan":
                 scan = decode(Scan, payload)
                 if scan.k > self.last_k:
-                    self.scans[scan.k] = scan
+                    row = self.scans.setdefault(scan.k, {})
+                    if row and next(iter(row.values())).scanners != scan.scanners:
+                        raise DecodeError(f"scan of tick {scan.k} from scanner {scan.scanner} "
+                                          f"of {scan.scanners}, its others of "
+                                          f"{next(iter(row.values())).scanners}")
+                    row[scan.scanner] = scan
                     self.first_seen.setdefault(scan.k, time.monotonic())
             else:
                 sense = decode(Sense, payload)
@@ -116,18 +122,22 @@ class LocalizerNode:
             self._drop(key, str(exc))
 
     def _ready(self, now: float) -> int | None:
-        """The oldest scanned tick that can be processed now, or None."""
+        """The oldest scanned tick that can be processed now, or None: every scanner's
+        scan and every robot's sensing in, or a later tick's scan, or the timeout."""
         if not self.scans:
             return None
         k = min(self.scans)
-        if len(self.senses.get(k, {})) == self.n:
+        row = self.scans[k]
+        complete = len(row) == next(iter(row.values())).scanners
+        if complete and len(self.senses.get(k, {})) == self.n:
             return k
         if len(self.scans) > 1 or now - self.first_seen[k] >= self.sense_timeout:
-            return k  # a robot's sensing went missing: go on without its motion
+            return k  # a scan or a robot's sensing went missing: go on without it
         return None
 
     def process(self, k: int) -> None:
-        scan = self.scans.pop(k)
+        row = self.scans.pop(k)
+        scans = [row[j] for j in sorted(row)]
         self.first_seen.pop(k, None)
         senses = self.senses.pop(k, {})
         if len(senses) < self.n:
@@ -136,11 +146,10 @@ class LocalizerNode:
         dtheta = np.zeros(self.n)
         for i, s in senses.items():
             dist[i], dtheta[i] = s.odom_dist_m, s.odom_dtheta
-        geometry = ScanGeometry(scan.scanner_x, scan.scanner_y, scan.scanner_theta,
-                                scan.angle_min, scan.angle_step, scan.range_max,
-                                len(scan.ranges))
         began = time.perf_counter()
-        estimates = self.core.step(np.asarray(scan.ranges), geometry, dist, dtheta)
+        views = [(np.asarray(s.ranges), ScanGeometry.of(s)) for s in scans]
+        estimates = self.core.step_scans(views, dist, dtheta)
+        scan = scans[0]
         self.update_s += time.perf_counter() - began
         for i, e in enumerate(estimates):
             pose = Pose(scan.t, k, i, e.x, e.y, e.theta, [e.var_x, e.var_y, e.var_theta], "pf")

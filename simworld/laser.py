@@ -18,11 +18,17 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from wire.messages import MAX_SCANNERS
+
 LMS_BEAMS = 361
 LMS_ANGLE_MIN = -0.5 * math.pi
 LMS_ANGLE_STEP = math.pi / 360.0
 LMS_RANGE_MAX_M = 8.0
 RANGE_NOISE_M = 0.01
+# Edge one scanner watches: 2 m behind the robots' start line, a robot 5 m to its side
+# and up to 3 m deep is still 6 m away, inside the LMS's 8 m with room for the far side
+# of the robot and a deeper patrol.
+SCANNER_SPAN_M = 10.0
 
 
 @dataclass(frozen=True)
@@ -52,12 +58,15 @@ class Laser:
     noise_m: float = RANGE_NOISE_M
     walls: Sequence[tuple[float, float, float, float]] = ()  # (x0, y0, x1, y1) segments
     seed: int = 1
+    stream: int = 0  # which scanner of a row: each has noise of its own
     _rng: np.random.Generator = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         if self.noise_m < 0 or self.radius <= 0:
             raise ValueError("laser noise must be >= 0 and the robot radius positive")
-        self._rng = np.random.default_rng([self.seed, 0x1A5E])
+        # the first scanner's stream is the one a single scanner always had
+        key = [self.seed, 0x1A5E] if self.stream == 0 else [self.seed, 0x1A5E, self.stream]
+        self._rng = np.random.default_rng(key)
         s = self.scanner
         world = s.theta + s.angles()
         self._dirs = np.stack([np.cos(world), np.sin(world)], axis=1)  # (beams, 2)
@@ -102,6 +111,25 @@ class Laser:
 
 
 Segment = tuple[float, float, float, float]
+
+
+def scanner_count(edge_lo: float, edge_hi: float) -> int:
+    """Scanners a row behind the team needs: one per SCANNER_SPAN_M of edge."""
+    return max(1, math.ceil((edge_hi - edge_lo) / SCANNER_SPAN_M - 1e-9))
+
+
+def scanner_row(edge_lo: float, edge_hi: float, y: float, count: int | None = None
+                ) -> list[Scanner]:
+    """``count`` scanners (default ``scanner_count``) at ``y``, facing the edge, each in
+    the middle of its equal share of [edge_lo, edge_hi]: one scanner is where the
+    thesis's was, behind the middle of the edge."""
+    count = scanner_count(edge_lo, edge_hi) if count is None else count
+    if not 1 <= count <= MAX_SCANNERS:
+        raise ValueError(f"scanners: 1 to {MAX_SCANNERS}, not {count}")
+    if count == 1:
+        return [Scanner(0.5 * (edge_lo + edge_hi), y)]
+    share = (edge_hi - edge_lo) / count
+    return [Scanner(edge_lo + (j + 0.5) * share, y) for j in range(count)]
 
 
 def box_walls(x0: float, y0: float, x1: float, y1: float) -> list[Segment]:

@@ -28,7 +28,7 @@ from typing import Any
 
 import zenoh
 
-from simworld.laser import Laser, Scanner, box_walls
+from simworld.laser import Laser, box_walls, scanner_count, scanner_row
 from simworld.maps import LASER_ROOM_M, ROBOT_ROOM_M, MapError, load_map
 from simworld.world import ODOM_NOISE, ROBOT_RADIUS_M, World, parse_start
 from wire import (
@@ -44,6 +44,7 @@ from wire import (
     decode,
     encode,
 )
+from wire.messages import MAX_SCANNERS
 from wire.session import (
     add_session_args,
     bounded_session,
@@ -89,6 +90,14 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         default=0.01,
         help="laser range noise, std in m (0.01)",
+    )
+    p.add_argument(
+        "--scanners",
+        type=int,
+        default=0,
+        metavar="N",
+        help="laser scanners in a row behind the team, each in the middle of its share of "
+        "the edge (default 0: one per 10 m of edge)",
     )
     p.add_argument(
         "--walls",
@@ -169,6 +178,17 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def lasers(world: World, args: argparse.Namespace) -> list[Laser]:
+    """The row of scanners behind the team (``scanner_row``), ``--scanners`` of them or
+    one per 10 m of edge, each with its own noise; ``--walls`` boxes the scene."""
+    lo, hi = world.map.edge_lo, world.map.edge_hi
+    count = args.scanners or scanner_count(lo, hi)
+    y = -(ROBOT_ROOM_M + LASER_ROOM_M)
+    walls = box_walls(lo - 1.0, y - 0.5, hi + 1.0, world.map.y_top) if args.walls else []
+    return [Laser(s, ROBOT_RADIUS_M, args.laser_noise, walls, args.seed, stream=j)
+            for j, s in enumerate(scanner_row(lo, hi, y, count))]
+
+
 class WorldProcess:
     """The shell around a ``World``: publishers, the event queue and the tick loop."""
 
@@ -189,13 +209,7 @@ class WorldProcess:
         self.rejected = 0  # well-formed but implausible input: foreign tokens
         self.recorder_alive = False
         self.localizer_alive = False
-        self.laser: Laser | None = None
-        if args.localization == "pf":
-            lo, hi = world.map.edge_lo, world.map.edge_hi
-            scanner = Scanner(0.5 * (lo + hi), -(ROBOT_ROOM_M + LASER_ROOM_M))
-            walls = box_walls(lo - 1.0, scanner.y - 0.5, hi + 1.0, world.map.y_top) \
-                if args.walls else []
-            self.laser = Laser(scanner, ROBOT_RADIUS_M, args.laser_noise, walls, args.seed)
+        self.lasers = lasers(world, args) if args.localization == "pf" else []
         self.kidnaps = parse_kidnaps(args.kidnap, self.dt)
         self.dropped = 0
         self.timeouts = 0
@@ -327,11 +341,11 @@ class WorldProcess:
             log.warning("tick %d: robot %d carried by (%g, %g) m", k, robot, dx, dy)
         odometry = self.pose_source == "odometry"
         truth = [world.truth(i) for i in range(self.n)]
-        if self.laser is not None:  # the localizer publishes the poses
-            s = self.laser.scanner
-            ranges = self.laser.scan([(x, y) for x, y, _ in truth])
+        for j, laser in enumerate(self.lasers):  # the localizer publishes the poses
+            s = laser.scanner
+            ranges = laser.scan([(x, y) for x, y, _ in truth])
             self.pub_scan.put(encode(Scan(t, k, ranges, s.x, s.y, s.theta, s.angle_min,
-                                          s.angle_step, s.range_max)))
+                                          s.angle_step, s.range_max, j, len(self.lasers))))
         for i, until in list(self.booting.items()):
             if t >= until - 1e-9:
                 del self.booting[i]
@@ -339,7 +353,7 @@ class WorldProcess:
             if i in self.booting:
                 continue  # still starting: no sensing yet
             r = world.sense(i)
-            if self.laser is None:  # the pose travels in the Sense
+            if not self.lasers:  # the pose travels in the Sense
                 pose = list(world.odometry_pose(i) if odometry else truth[i])
                 source = self.pose_source
             else:
@@ -356,7 +370,7 @@ class WorldProcess:
         deadline = time.monotonic() + self.args.startup_timeout
         while not self.stopping:
             recorder_ok = self.recorder_alive or not self.args.wait_recorder
-            localizer_ok = self.localizer_alive or self.laser is None
+            localizer_ok = self.localizer_alive or not self.lasers
             if self.live >= self.team and recorder_ok and localizer_ok:
                 return True
             remaining = deadline - time.monotonic()
@@ -516,6 +530,8 @@ def _check_args(args: argparse.Namespace) -> str | None:
                 "and --hold-timeout must be >= 0")
     if args.laser_noise < 0:
         return "--laser-noise must be >= 0"
+    if not 0 <= args.scanners <= MAX_SCANNERS:
+        return f"--scanners must be 0 (one per 10 m of edge) to {MAX_SCANNERS}"
     try:
         kidnaps = parse_kidnaps(args.kidnap, args.dt)
     except ValueError as exc:

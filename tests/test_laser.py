@@ -9,7 +9,7 @@ import msgpack
 import numpy as np
 import pytest
 
-from simworld.laser import LMS_BEAMS, Laser, Scanner, box_walls
+from simworld.laser import LMS_BEAMS, Laser, Scanner, box_walls, scanner_count, scanner_row
 from wire import DecodeError, Scan, decode, encode
 
 SCANNER = Scanner(3.0, -2.0)
@@ -70,8 +70,25 @@ def test_scan_round_trip() -> None:
     {"ranges": ["1.0"]},
     {"angle_step": 0.0},
     {"k": -1},
+    {"scanner": 1},  # of a row of one
+    {"scanner": -1, "scanners": 2},
+    {"scanner": 0, "scanners": 17},
 ])
 def test_malformed_scans_are_refused(bad: dict[str, object]) -> None:
     raw = msgpack.packb({**scan().__dict__, **bad})
     with pytest.raises(DecodeError):
         decode(Scan, raw)
+
+
+def test_a_row_of_scanners_shares_the_edge_and_each_has_its_own_noise() -> None:
+    assert [s.x for s in scanner_row(0.0, 6.0, -2.0)] == [3.0]  # the thesis's one
+    assert scanner_count(0.0, 10.0) == 1 and scanner_count(0.0, 10.5) == 2
+    row = scanner_row(0.0, 30.0, -2.0)
+    assert [s.x for s in row] == [5.0, 15.0, 25.0] and {s.y for s in row} == {-2.0}
+    assert all(math.isclose(s.theta, math.pi / 2) for s in row)  # facing the edge
+    with pytest.raises(ValueError, match="1 to 16"):
+        scanner_row(0.0, 6.0, -2.0, 17)
+    a, b = (Laser(Scanner(0.0, 0.0), seed=4, stream=j) for j in (0, 1))
+    assert a.scan([(0.0, 2.0)]) != b.scan([(0.0, 2.0)])
+    assert Laser(Scanner(0.0, 0.0), seed=4).scan([(0.0, 2.0)]) == \
+        Laser(Scanner(0.0, 0.0), seed=4, stream=0).scan([(0.0, 2.0)])

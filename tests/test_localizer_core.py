@@ -17,6 +17,7 @@ from localizer.core import (
     assign,
     blob_centre,
     measure_centres,
+    merge_centres,
     split_blobs,
     systematic_resample,
 )
@@ -169,3 +170,42 @@ def test_vectorised_resampler_matches_filterpy() -> None:
         expected.append(filterpy_systematic(weights[r]))
     got = systematic_resample(weights, offsets)
     assert np.array_equal(got, np.asarray(expected))
+
+
+def test_a_robot_two_scanners_see_is_one_centre() -> None:
+    a = np.array([[1.0, 0.0], [2.0, 1.0]])
+    b = np.array([[2.01, 1.0], [9.0, 0.5], [1.02, 0.0]])  # robot 1, a third, robot 0
+    merged = merge_centres([a, b], 0.17)
+    assert merged.shape == (3, 2)
+    assert np.allclose(merged, [[1.01, 0.0], [2.005, 1.0], [9.0, 0.5]])
+    assert merge_centres([a], 0.17) is a  # one scanner: as measured
+    close = np.array([[1.0, 0.0], [1.1, 0.0]])  # one scan's blobs stay its own
+    assert merge_centres([close, np.empty((0, 2))], 0.17).shape == (2, 2)
+
+
+def test_a_row_of_scanners_tracks_a_team_one_scanner_cannot_see() -> None:
+    """Four robots along 20 m: from the middle the ends are beyond the LMS's 8 m; a
+    row of two sees every robot, and where both see one it is still one robot."""
+    starts = [(x, -1.0, 0.5 * math.pi) for x in (0.5, 7.0, 13.0, 19.5)]
+    poses, odom = straight_lines(starts, 0.3, 60)
+    row = [Scanner(5.0, -2.0), Scanner(15.0, -2.0)]
+    lasers = [Laser(s, seed=5, stream=j) for j, s in enumerate(row)]
+    geometries = [ScanGeometry(s.x, s.y, s.theta, s.angle_min, s.angle_step, s.range_max,
+                               s.beams) for s in row]
+    loc = Localizer(4, seed=5)
+    for k in range(poses.shape[0]):
+        scans = [(scan_of(laser, poses[k, :, :2].tolist()), g)
+                 for laser, g in zip(lasers, geometries, strict=True)]
+        est = loc.step_scans(scans, odom[k, :, 0], odom[k, :, 1])
+    for r, e in enumerate(est):
+        assert math.dist((e.x, e.y), poses[-1, r, :2]) < 0.03 and not e.lost
+    assert loc.reseeded == 4  # each robot seeded once, none from a duplicate centre
+    alone = Localizer(4, seed=5)
+    middle = Scanner(10.0, -2.0)
+    laser = Laser(middle, seed=5)
+    geometry = ScanGeometry(middle.x, middle.y, middle.theta, middle.angle_min,
+                            middle.angle_step, middle.range_max, middle.beams)
+    for k in range(poses.shape[0]):
+        est = alone.step(scan_of(laser, poses[k, :, :2].tolist()), geometry, odom[k, :, 0],
+                         odom[k, :, 1])
+    assert sum(e.lost for e in est) >= 2  # the ends were never seen

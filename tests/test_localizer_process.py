@@ -9,6 +9,7 @@ import queue
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from report.load import load_run
 from report.localization import localization_errors
@@ -27,11 +28,17 @@ from wire import Keys, Pose, Scan, Sense, decode, encode
 from wire.session import declare_publisher
 
 
-def test_localizer_process_tracks_two_robots_from_scans_on_the_bus(tmp_path: Path) -> None:
+@pytest.mark.parametrize("scanners, truth", [
+    ([Scanner(3.0, -2.0)], [(1.0, -1.0), (4.5, -1.0)]),
+    # a row of two, 14 m apart: each robot is in the range of one scanner only, so
+    # both are tracked only if every tick waits for both scans
+    ([Scanner(0.0, -2.0), Scanner(14.0, -2.0)], [(1.0, -1.0), (13.5, -1.0)]),
+])
+def test_localizer_process_tracks_two_robots_from_scans_on_the_bus(
+        tmp_path: Path, scanners: list[Scanner], truth: list[tuple[float, float]]) -> None:
     ns, port = unique_ns(), free_port()
     keys = Keys(ns)
-    scanner = Scanner(3.0, -2.0)
-    laser = Laser(scanner, seed=11)
+    lasers = [Laser(s, seed=11, stream=j) for j, s in enumerate(scanners)]
     with hub_session(ns, port) as session:
         poses: queue.SimpleQueue[Pose] = queue.SimpleQueue()
         session.declare_subscriber(keys.pose("*"),
@@ -45,7 +52,6 @@ def test_localizer_process_tracks_two_robots_from_scans_on_the_bus(tmp_path: Pat
                      tmp_path / "localizer.log")
         try:
             wait_for(lambda: bool(alive), 30, "the localizer's liveliness token")
-            truth = [(1.0, -1.0), (4.5, -1.0)]
             step = 0.04  # both drive +y at 0.4 m/s, 10 Hz
             errors = []
             for k in range(30):
@@ -53,8 +59,13 @@ def test_localizer_process_tracks_two_robots_from_scans_on_the_bus(tmp_path: Pat
                 centres = [(x, y + step * k) for x, y in truth]
                 if k == 3:
                     pub_scan.put(b"\x92\x01 not a scan")
-                pub_scan.put(encode(Scan(t, k, laser.scan(centres), scanner.x, scanner.y,
-                                         scanner.theta)))
+                for j in reversed(range(len(lasers))):  # in any order
+                    s = lasers[j].scanner
+                    pub_scan.put(encode(Scan(t, k, lasers[j].scan(centres), s.x, s.y, s.theta,
+                                             scanner=j, scanners=len(lasers))))
+                if k == 5 and len(lasers) > 1:  # a scanner of a row the others are not of
+                    pub_scan.put(encode(Scan(t, k, lasers[0].scan(centres), 0.0, -2.0,
+                                             math.pi / 2, scanner=2, scanners=3)))
                 for i in (0, 1):
                     pub_sense[i].put(encode(Sense(t, k, i, False, False, step if k else 0.0,
                                                   0.0, 0.0, 6.0, 0.1)))
@@ -71,7 +82,7 @@ def test_localizer_process_tracks_two_robots_from_scans_on_the_bus(tmp_path: Pat
             end(proc)
         out = proc.stdout.read().decode() if proc.stdout else ""
     summary = json.loads(out.strip().splitlines()[-1])
-    assert summary["scans"] == 30 and summary["dropped"] == 1
+    assert summary["scans"] == 30 and summary["dropped"] == len(scanners)
     assert max(max(e) for e in errors) < 0.05
     assert np.mean(errors) < 0.02
 

@@ -54,6 +54,8 @@ def _refused(tmp_path: Path, capsys: pytest.CaptureFixture[str], *argv: str) -> 
     (["--robots", "39", "--fault", "join:39@1", "--fault", "join:40@2"],
      "41 robots need 6.15 m of edge"),
     (["--map", "no-such-map"], "--map: unknown map 'no-such-map'"),
+    (["--scanners", "0"], "--scanners must be between 1 and 16, not 0"),
+    (["--scanners", "2", "--localization", "truth"], "--scanners: the laser scans only"),
 ])
 def test_sim_refuses_by_name_before_starting_anything(tmp_path, capsys, argv, expected):
     assert expected in _refused(tmp_path, capsys, *argv)
@@ -66,6 +68,7 @@ def test_sim_refuses_by_name_before_starting_anything(tmp_path, capsys, argv, ex
     (["--hil", "--odom-noise", "0.1"], "--odom-noise: not with --hil"),
     (["--hil", "--localization", "pf"], "--localization pf: not with --hil"),
     (["--hil", "--boot-s", "2"], "--boot-s: not with --hil"),
+    (["--hil", "--scanners", "2"], "--scanners: not with --hil"),
     (["--hil-faults", "0.1"], "--hil-faults needs --hil"),
 ])
 def test_options_the_hardware_loop_would_ignore_are_refused_by_name(tmp_path, capsys, argv,

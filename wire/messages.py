@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass, field
 
 TWO_PI = 2.0 * math.pi
+MAX_SCANNERS = 16  # laser scanners watching one team
 
 
 class InvalidMessage(ValueError):
@@ -77,7 +78,9 @@ class Scan:
     geometry by default: 361 ranges from ``angle_min`` in steps of ``angle_step``
     (radians, counter-clockwise, relative to the scanner's heading). A beam that
     sees nothing reads ``range_max``. The scanner's pose in the world frame is part
-    of the message, so the localizer needs no map of its own (thesis 6.1.5)."""
+    of the message, so the localizer needs no map of its own (thesis 6.1.5). A team
+    watched by a row of scanners gets one Scan per scanner and tick, ``scanner`` of
+    ``scanners``, all on the one key."""
 
     t: float
     k: int
@@ -88,9 +91,13 @@ class Scan:
     angle_min: float = -0.5 * math.pi
     angle_step: float = math.pi / 360.0
     range_max: float = 8.0
+    scanner: int = 0  # which scanner of the row
+    scanners: int = 1  # how many scans each tick has
 
     def check(self) -> None:
         _require(self.t >= 0 and self.k >= 0, "negative t or k")
+        _require(0 <= self.scanner < self.scanners <= MAX_SCANNERS,
+                 f"scanner {self.scanner} of {self.scanners} (at most {MAX_SCANNERS})")
         _require(1 <= len(self.ranges) <= 4096, "ranges: 1 to 4096 beams")
         _require(self.angle_step > 0 and self.range_max > 0, "bad angle_step or range_max")
         _require(
