@@ -359,32 +359,65 @@ def point_gaps(
     None for a point seen fewer than twice there. A visit is a crossing within
     ``radius`` of the point; crossings of one point with the same ``visit_group`` (one
     robot's one sweep along its segment) count as one visit, at the first."""
+    out: list[np.ndarray | None] = []
+    for times in point_visits(points, visit_t, visit_x, radius, merge_s, visit_group):
+        times = times[(times >= t_from) & (times <= t_to)]
+        out.append(np.diff(times) if times.size >= 2 else None)
+    return out
+
+
+def point_visits(
+    points: np.ndarray,
+    visit_t: np.ndarray,
+    visit_x: np.ndarray,
+    radius: float,
+    merge_s: float = 1.0,
+    visit_group: np.ndarray | None = None,
+) -> list[np.ndarray]:
+    """For each point, the sorted times of its visits over the whole run, as
+    ``point_gaps`` counts them."""
     visit_t = np.asarray(visit_t, dtype=float)
     visit_x = np.asarray(visit_x, dtype=float)
     order = np.argsort(visit_t, kind="stable")
     visit_t, visit_x = visit_t[order], visit_x[order]
     groups = None if visit_group is None else np.asarray(visit_group)[order]
-    out: list[np.ndarray | None] = []
+    out = []
     for p in np.asarray(points, dtype=float):
         near = np.abs(visit_x - p) <= radius
         times = visit_t[near]
         if groups is not None and times.size:
             _, first = np.unique(groups[near], return_index=True)
             times = np.sort(times[first])
-        times = merge_visits(times, merge_s)
-        times = times[(times >= t_from) & (times <= t_to)]
-        out.append(np.diff(times) if times.size >= 2 else None)
+        out.append(merge_visits(times, merge_s))
     return out
 
 
+def worst_idleness(visits: np.ndarray, t_from: float, t_to: float, t_start: float
+                   ) -> float:
+    """The worst idleness of a point over [t_from, t_to], as patrol benchmarks define
+    it: the longest any moment of the window had waited since the point's last visit
+    (since ``t_start``, the run's start, before its first). A visit before the window
+    counts: a point last seen just before it has waited that long already at its start,
+    and one the window sees once is not the whole window unvisited."""
+    visits = np.asarray(visits, dtype=float)
+    marks = np.concatenate([[t_start], visits[visits <= t_to], [t_to]])
+    since, until = marks[:-1], np.minimum(marks[1:], t_to)
+    overlap = until >= t_from
+    return float((until[overlap] - since[overlap]).max())
+
+
 def revisit_profile(
-    gaps: Sequence[np.ndarray | None], t_from: float, t_to: float
+    gaps: Sequence[np.ndarray | None], t_from: float, t_to: float,
+    worst: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Mean and worst revisit time of each point; a point seen fewer than twice in the
-    window has no mean (NaN) and the whole window as its worst."""
+    """Mean and worst revisit time of each point: the worst is ``worst`` if given (the
+    points' ``worst_idleness``), else the longest of its gaps; a point seen fewer than
+    twice in the window has no mean (NaN) and, without ``worst``, the whole window as
+    its worst."""
     mean = np.array([float(g.mean()) if g is not None else math.nan for g in gaps])
-    worst = np.array([float(g.max()) if g is not None else t_to - t_from for g in gaps])
-    return mean, worst
+    if worst is None:
+        worst = np.array([float(g.max()) if g is not None else t_to - t_from for g in gaps])
+    return mean, np.asarray(worst, dtype=float)
 
 
 def revisit_intervals(
@@ -405,25 +438,27 @@ def revisit_intervals(
 
 
 def pooled_revisit(
-    gaps: Sequence[np.ndarray | None], t_from: float, t_to: float
+    gaps: Sequence[np.ndarray | None], t_from: float, t_to: float,
+    worst: np.ndarray | None = None,
 ) -> tuple[float, float]:
     """Mean over every interval of every point, and the worst point's worst."""
-    mean, _, worst = idleness(gaps, t_from, t_to)
-    return mean, worst
+    mean, _, worst_s = idleness(gaps, t_from, t_to, worst)
+    return mean, worst_s
 
 
 def idleness(
-    gaps: Sequence[np.ndarray | None], t_from: float, t_to: float
+    gaps: Sequence[np.ndarray | None], t_from: float, t_to: float,
+    worst: np.ndarray | None = None,
 ) -> tuple[float, float, float]:
     """Idleness as patrol benchmarks report it: over every point and every interval
     between its consecutive visits in [t_from, t_to] (``point_gaps``), the mean and the
-    standard deviation of the intervals, and the worst (the worst point's worst; a
-    point seen fewer than twice counts the whole window)."""
+    standard deviation of the intervals, and the worst point's worst
+    (``revisit_profile``: ``worst`` per point if given)."""
     known = [g for g in gaps if g is not None]
     pooled = np.concatenate(known) if known else np.empty(0)
-    _, worst = revisit_profile(gaps, t_from, t_to)
+    _, per_point = revisit_profile(gaps, t_from, t_to, worst)
     std = float(pooled.std()) if pooled.size else math.nan
-    return nanmean(pooled), std, nanmax(worst)
+    return nanmean(pooled), std, nanmax(per_point)
 
 
 def edge_points(edge_lo: float, edge_hi: float, step: float = 0.1) -> np.ndarray:
@@ -494,12 +529,13 @@ def visit_gaps(
     edge: EdgeModel,
     t_from: float,
     t_to: float,
-) -> tuple[np.ndarray, list[np.ndarray | None]]:
+) -> tuple[np.ndarray, list[np.ndarray | None], np.ndarray]:
     """Points every POINT_STEP_M along the edge and, for each, the times between its
-    consecutive visits in [t_from, t_to] (``point_gaps``): a visit is a crossing of the
-    local edge (``crossings``) within the robot radius of the point, one per robot
-    sweep. ``tracks``: per robot, its track's t, x, y and the times and directions
-    that tell its sweeps apart (``sweep_index``)."""
+    consecutive visits in [t_from, t_to] (``point_gaps``) and its worst idleness over
+    the window (``worst_idleness``, from the first track's start): a visit is a
+    crossing of the local edge (``crossings``) within the robot radius of the point,
+    one per robot sweep. ``tracks``: per robot, its track's t, x, y and the times and
+    directions that tell its sweeps apart (``sweep_index``)."""
     visit_t, visit_x, visit_group = [np.empty(0)], [np.empty(0)], [np.empty(0, np.int64)]
     for j, (t, x, y, sweep_t, sweep_direction) in enumerate(tracks):
         tc, xc = crossings(t, x, y, edge)
@@ -507,17 +543,16 @@ def visit_gaps(
         visit_x.append(xc)
         visit_group.append(j * 1_000_000 + sweep_index(sweep_t, sweep_direction, tc))
     points = edge_points(edge.edge_lo, edge.edge_hi, POINT_STEP_M)
-    gaps = point_gaps(
-        points,
-        np.concatenate(visit_t),
-        np.concatenate(visit_x),
-        edge.robot_radius,
-        t_from,
-        t_to,
-        VISIT_MERGE_S,
-        np.concatenate(visit_group),
-    )
-    return points, gaps
+    visits = point_visits(points, np.concatenate(visit_t), np.concatenate(visit_x),
+                          edge.robot_radius, VISIT_MERGE_S, np.concatenate(visit_group))
+    gaps: list[np.ndarray | None] = []
+    for times in visits:
+        inside = times[(times >= t_from) & (times <= t_to)]
+        gaps.append(np.diff(inside) if inside.size >= 2 else None)
+    starts = [float(tr[0][0]) for tr in tracks if len(tr[0])]
+    t_start = min(starts) if starts else t_from
+    worst = np.array([worst_idleness(v, t_from, t_to, t_start) for v in visits])
+    return points, gaps, worst
 
 
 def idleness_measures(
@@ -527,11 +562,13 @@ def idleness_measures(
     team_sweep_rate: float,
     edge_length: float,
     closed: bool = False,
+    worst_per_point: np.ndarray | None = None,
 ) -> dict[str, float]:
     """The revisit keys of ``team_measures``: idleness mean, standard deviation and
-    worst (``idleness``), the ideal mean L / (n v) (``ideal_revisit``), the partition
-    optimum of the worst (``partition_optimum``) and the worst over that optimum."""
-    mean, std, worst = idleness(gaps, t_from, t_to)
+    worst (``idleness``, with each point's ``worst_idleness`` if given), the ideal
+    mean L / (n v) (``ideal_revisit``), the partition optimum of the worst
+    (``partition_optimum``) and the worst over that optimum."""
+    mean, std, worst = idleness(gaps, t_from, t_to, worst_per_point)
     optimum = partition_optimum(edge_length, team_sweep_rate, closed)
     return {
         "revisit_mean_s": mean,
@@ -754,10 +791,11 @@ def team_measures(
     x_live, y_live = np.where(alive, x, np.nan), np.where(alive, y, np.nan)
     t_from, t_to = revisit_window(t)
     tracks = [(t, x_live[j], y_live[j], t, direction[j]) for j in range(x.shape[0])]
-    _, gaps = visit_gaps(tracks, edge, t_from, t_to)
+    _, gaps, worst = visit_gaps(tracks, edge, t_from, t_to)
     rate = sweep_rate([(t, x_live[j]) for j in range(x.shape[0])], t_from, t_to,
                       [(t, direction[j]) for j in range(x.shape[0])])
-    out.update(idleness_measures(gaps, t_from, t_to, rate, edge.length))
+    out.update(idleness_measures(gaps, t_from, t_to, rate, edge.length,
+                                 worst_per_point=worst))
     still_from = float(t[0] + (1.0 - last) * (t[-1] - t[0]))
     still = [still_fraction(t, x[j], y[j], still_from, alive[j]) for j in range(x.shape[0])]
     out["still_frac_max"] = nanmax(np.asarray(still))

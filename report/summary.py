@@ -124,6 +124,7 @@ class Revisit:
     t_to: float
     sweep_rate: float  # the team's along-edge sweep rate n v over the window, m/s
     edge_length: float  # m, along x
+    worst: np.ndarray | None = None  # per point, its worst idleness over the window
 
     @property
     def ideal_s(self) -> float:
@@ -136,15 +137,15 @@ class Revisit:
         return m.partition_optimum(self.edge_length, self.sweep_rate)
 
     def profile(self) -> tuple[np.ndarray, np.ndarray]:
-        return m.revisit_profile(self.gaps, self.t_from, self.t_to)
+        return m.revisit_profile(self.gaps, self.t_from, self.t_to, self.worst)
 
     def pooled(self) -> tuple[float, float]:
-        return m.pooled_revisit(self.gaps, self.t_from, self.t_to)
+        return m.pooled_revisit(self.gaps, self.t_from, self.t_to, self.worst)
 
     def measures(self) -> dict[str, float]:
         """The revisit keys of the summary (``measures.idleness_measures``)."""
         return m.idleness_measures(self.gaps, self.t_from, self.t_to, self.sweep_rate,
-                                   self.edge_length)
+                                   self.edge_length, worst_per_point=self.worst)
 
 
 NO_REVISIT = m.idleness_measures([], math.nan, math.nan, math.nan, math.nan)
@@ -164,10 +165,10 @@ def revisit(run: RunData, t: np.ndarray) -> Revisit | None:
         st = run.states.get(rid)
         sweeps = (st.t, st.direction) if st is not None else (no_states, no_states)
         per_robot.append((tr.t, tr.x, tr.y, *sweeps))
-    points, gaps = m.visit_gaps(per_robot, edge, t_from, t_to)
+    points, gaps, worst = m.visit_gaps(per_robot, edge, t_from, t_to)
     rate = m.sweep_rate([(tr.t, tr.x) for tr in tracks.values()], t_from, t_to,
                         [(r[3], r[4]) for r in per_robot])
-    return Revisit(points, gaps, t_from, t_to, rate, edge.length)
+    return Revisit(points, gaps, t_from, t_to, rate, edge.length, worst)
 
 
 def still_frac_max(run: RunData, s: ErrorSeries, last: float = STEADY_LAST) -> float:
