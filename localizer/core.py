@@ -124,10 +124,17 @@ class Estimate:
 def split_blobs(ranges: np.ndarray, geometry: ScanGeometry, jump_m: float) -> list[np.ndarray]:
     """Beam indices of each blob: runs of returns (below the maximum range) whose
     neighbouring returns are less than ``jump_m`` apart."""
+    starts, ends = blob_spans(ranges, geometry, jump_m)
+    return [np.arange(a, b) for a, b in zip(starts.tolist(), ends.tolist(), strict=True)]
+
+
+def blob_spans(ranges: np.ndarray, geometry: ScanGeometry, jump_m: float
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """``split_blobs`` as each blob's first beam and the beam after its last."""
     r = np.asarray(ranges, dtype=float)
     hit = r < geometry.range_max - 1e-6
     if not hit.any():
-        return []
+        return np.empty(0, dtype=np.intp), np.empty(0, dtype=np.intp)
     a = geometry.theta + geometry.angle_min + geometry.angle_step * np.arange(r.size)
     px, py = r * np.cos(a), r * np.sin(a)
     gap = np.hypot(np.diff(px), np.diff(py))
@@ -135,8 +142,8 @@ def split_blobs(ranges: np.ndarray, geometry: ScanGeometry, jump_m: float) -> li
     breaks = ~hit[:-1] | ~hit[1:] | (gap > jump_m)
     starts = np.flatnonzero(np.concatenate([[True], breaks]))
     ends = np.append(starts[1:], r.size)
-    return [np.arange(a, b) for a, b in zip(starts.tolist(), ends.tolist(), strict=True)
-            if hit[a]]
+    keep = hit[starts]
+    return starts[keep], ends[keep]
 
 
 def blob_points(ranges: np.ndarray, geometry: ScanGeometry, beams: np.ndarray) -> np.ndarray:
@@ -212,14 +219,14 @@ def measure_centres(ranges: np.ndarray, geometry: ScanGeometry,
     """Centres (m, 2) of every robot-shaped blob of a scan: ``blob_centre`` for all
     blobs at once (blobs padded to one length and masked, one Gauss-Newton for all),
     so thirty robots cost little more than three."""
-    blobs = [b for b in split_blobs(ranges, geometry, config.jump_m)
-             if b.size >= config.min_returns]
-    if not blobs:
+    starts, ends = blob_spans(ranges, geometry, config.jump_m)
+    big_enough = ends - starts >= config.min_returns
+    if not big_enough.any():
         return np.empty((0, 2))
     r_all = np.asarray(ranges, dtype=float)
-    lengths = np.array([b.size for b in blobs])
+    first = starts[big_enough]
+    lengths = ends[big_enough] - first
     width = int(lengths.max())
-    first = np.array([b[0] for b in blobs])
     offs = np.minimum(np.arange(width)[None, :], lengths[:, None] - 1)
     beams = first[:, None] + offs  # (B, K), padded with each blob's last beam
     mask = (np.arange(width)[None, :] < lengths[:, None]).astype(float)
@@ -229,7 +236,7 @@ def measure_centres(ranges: np.ndarray, geometry: ScanGeometry,
     px = geometry.x + rng * np.cos(ang)
     py = geometry.y + rng * np.sin(ang)
     last = lengths - 1
-    rows = np.arange(len(blobs))
+    rows = np.arange(first.size)
     chord = np.hypot(px[rows, last] - px[:, 0], py[rows, last] - py[:, 0])
     # the thesis's estimate: nearest return plus the radius along its bearing
     near = np.argmin(np.where(mask > 0, rng, np.inf), axis=1)
@@ -266,26 +273,28 @@ def measure_centres(ranges: np.ndarray, geometry: ScanGeometry,
 
 def merge_centres(per_scan: Sequence[np.ndarray], radius: float) -> np.ndarray:
     """The centres (m, 2) several scanners measured in one tick, one per robot: a
-    centre less than a robot's radius from one an earlier scanner measured is the same
-    robot (two robots' centres are two radii apart at least), and the two are
+    centre less than a robot's radius from one the earlier scanners measured is the
+    same robot (two robots' centres are two radii apart at least), and the two are
     averaged. One scan's centres are returned as they are."""
     if len(per_scan) == 1:
         return per_scan[0]
-    merged: list[np.ndarray] = []
-    counts: list[int] = []
+    merged = np.empty((0, 2))
+    counts = np.empty(0)
     for centres in per_scan:
-        first_of_scan = len(merged)  # a scan's own centres are distinct robots
-        for c in centres:
-            near = [j for j in range(first_of_scan)
-                    if float(np.hypot(*(merged[j] - c))) < radius]
-            if near:
-                j = min(near, key=lambda j: float(np.hypot(*(merged[j] - c))))
-                merged[j] = (merged[j] * counts[j] + c) / (counts[j] + 1)
-                counts[j] += 1
-            else:
-                merged.append(np.asarray(c, dtype=float))
-                counts.append(1)
-    return np.array(merged).reshape(-1, 2)
+        centres = np.asarray(centres, dtype=float).reshape(-1, 2)
+        if merged.shape[0] and centres.shape[0]:
+            d = np.hypot(centres[:, None, 0] - merged[None, :, 0],
+                         centres[:, None, 1] - merged[None, :, 1])  # (this scan's, earlier)
+            j = d.argmin(axis=1)
+            same = d[np.arange(centres.shape[0]), j] < radius
+            sums = merged * counts[:, None]
+            np.add.at(sums, j[same], centres[same])
+            np.add.at(counts, j[same], 1.0)
+            merged = sums / counts[:, None]
+            centres = centres[~same]
+        merged = np.vstack([merged, centres])
+        counts = np.concatenate([counts, np.ones(centres.shape[0])])
+    return merged
 
 
 def assign(predicted: np.ndarray, candidates: np.ndarray, active: np.ndarray,
