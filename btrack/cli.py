@@ -17,6 +17,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "localizer": ("localizer.process", "laser localisation: one particle filter per robot"),
     "record": ("recorder.process", "record everything on the bus into an MCAP file"),
     "report": ("report.cli", "measures, summary.json and figures from a recorded run"),
+    "scene": ("scene.cli", "add Foxglove's channels to a recording, or draw them (--png)"),
+    "replay": ("replay.process", "put a recording's messages back on the bus"),
     "suite": ("deploy.suite", "the thesis's twelve cases, or general: random maps x teams"),
     "router": ("deploy.router", "a Zenoh router (the base station's), TLS and access control"),
     "deploy": ("deploy.cli", "a fleet's configurations, units and certificates from FLEET.toml"),

@@ -13,6 +13,7 @@ import json
 import math
 import os
 import signal
+import subprocess
 import sys
 import threading
 import time
@@ -116,6 +117,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also kill and restart, freeze and thaw random agents at random "
                    "times drawn from SEED")
     p.add_argument("--no-report", action="store_true", help="skip the report at the end")
+    p.add_argument("--no-scene", action="store_true",
+                   help="skip adding the Foxglove channels to the recording at the end")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.add_argument("--progress-every", type=non_negative, metavar="SECONDS",
                    help="wall seconds between progress lines (1 on a terminal, else 5)")
@@ -458,13 +461,31 @@ def run(args: argparse.Namespace) -> int:
         group.stop_all()
     wall = time.monotonic() - t_wall0
     print(f"\nbtrack sim: run finished in {wall:.1f} s wall; recording {out / 'run.mcap'}")
-    if args.no_report:
-        return 0
-    from report.cli import make_report
+    # The Foxglove channels are made from the finished recording (scene.convert), not
+    # by the recorder on the lockstep's cores; in a process of its own, beside the
+    # report, which reads the raw channels either way.
+    scene = None if args.no_scene else subprocess.Popen(
+        [sys.executable, "-m", "btrack", "scene", str(out)], stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        if not args.no_report:
+            from report.cli import make_report
 
-    summary = make_report(out)
-    print(json.dumps(summary, indent=2))
-    print(f"btrack sim: report in {out / 'report.md'}")
+            summary = make_report(out)
+            print(json.dumps(summary, indent=2))
+            print(f"btrack sim: report in {out / 'report.md'}")
+        if scene is not None:
+            stdout, stderr = scene.communicate()
+            if scene.returncode == 0:
+                print(f"btrack sim: Foxglove channels added to {out / 'run.mcap'} "
+                      f"{stdout.strip()} (layout: docs/foxglove-layout.json)")
+            else:
+                print(f"btrack sim: no Foxglove channels: {stderr.strip()[-500:]}",
+                      file=sys.stderr)
+    finally:
+        if scene is not None and scene.poll() is None:
+            scene.kill()  # ours, by its pid: an interrupted run leaves the raw recording
+            scene.wait()
     return 0
 
 

@@ -180,6 +180,8 @@ def load_run(path: str | Path) -> RunData:
             for channel, message in _messages(stream, cut):
                 read += 1
                 topic = channel.topic
+                if topic.startswith("/"):  # the Foxglove view (scene.build), derived
+                    continue
                 if topic.startswith("invalid/"):
                     invalid += 1
                     continue

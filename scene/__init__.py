@@ -1,0 +1,1 @@
+"""The Foxglove view of a run: its scene, recorded (convert) or drawn (render)."""
