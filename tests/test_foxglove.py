@@ -20,22 +20,9 @@ from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
 from mcap.reader import make_reader
 
 from report.load import load_run
-from tests.procutil import run_sim
 
 OFFICIAL = {cls.DESCRIPTOR.full_name: cls
             for cls in (LaserScan, FrameTransforms, PosesInFrame, SceneUpdate)}
-
-
-@pytest.fixture(scope="module")
-def pf_run(tmp_path_factory):
-    """A short particle-filter run with a row of two scanners (``btrack sim`` adds the
-    Foxglove channels at its end)."""
-    out = tmp_path_factory.mktemp("fox") / "pf"
-    result = run_sim(out, "--robots", "2", "--duration", "20", "--scanners", "2",
-                     "--seed", "3", timeout=240)
-    assert result.returncode == 0, result.stderr[-3000:]
-    assert "Foxglove channels added" in result.stdout, result.stdout[-2000:]
-    return out
 
 
 def _read(path: Path):
@@ -228,3 +215,31 @@ def test_bad_recordings_are_refused_clearly(tmp_path):
         assert "Traceback" not in res.stderr and str(junk) in res.stderr
     assert junk.read_bytes() == b"this is not an mcap file" * 10  # left as it was
     assert not list(tmp_path.glob("*.tmp"))
+
+
+def test_the_layout_names_the_recordings_channels(pf_run):
+    """docs/foxglove-layout.json opens on such a recording: every topic its 3D panel
+    shows and every path its plots draw is there."""
+    layout = json.loads((Path(__file__).parent.parent / "docs" / "foxglove-layout.json")
+                        .read_text())
+    _, view, _, _ = _read(pf_run / "run.mcap")
+    panels = layout["configById"]
+    shown = set(panels["3D!btrack"]["topics"])
+    assert shown - {"/scan/1"} <= set(view)  # a second scanner only on long edges
+    for panel in ("Plot!errors", "Plot!segments"):
+        for p in panels[panel]["paths"]:
+            topic, rest = p["value"].split(".", 1)
+            name, index = rest.rstrip("]").split("[")
+            row = view[topic][-1][1]
+            assert isinstance(row[name], list), p["value"]
+            if topic == "/plot/segments":
+                assert int(index) < 3
+    assert set(_ids(layout["layout"])) == set(panels)
+
+
+def _ids(node):
+    if isinstance(node, str):
+        yield node
+    else:
+        yield from _ids(node["first"])
+        yield from _ids(node["second"])
