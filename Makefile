@@ -20,7 +20,7 @@ test: $(STAMP)
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
-	$(BIN)/mypy agent wire localizer hwbridge deploy report recorder simworld btrack
+	$(BIN)/mypy agent wire localizer hwbridge deploy report recorder simworld btrack scene replay
 	$(BIN)/mypy bench  # apart: bench/localizer.py would clash with the localizer package
 
 bench: $(STAMP)

@@ -20,6 +20,7 @@ import sys
 import threading
 import time
 from collections import Counter
+from functools import partial
 from pathlib import Path
 
 import msgpack
@@ -119,6 +120,13 @@ def _wait_tokens(session: zenoh.Session, keys: Keys, tokens: list[str]) -> str |
     return None
 
 
+def _matched(publisher: zenoh.Publisher) -> bool:
+    """Whether some subscriber matches (a MatchingStatus at run time, a bool in the
+    stubs)."""
+    status: object = publisher.matching_status
+    return bool(getattr(status, "matching", status))
+
+
 def replay(session: zenoh.Session, keys: Keys, items: list[Item], args: argparse.Namespace
            ) -> Counter[str]:
     """Put every item; the count put per topic."""
@@ -143,9 +151,9 @@ def replay(session: zenoh.Session, keys: Keys, items: list[Item], args: argparse
     # before tick 0): a subscription seen by liveliness alone can still be on its way,
     # and the peers' direct links come up just after they meet.
     deadline = time.monotonic() + STARTUP_S
-    while args.wait_for and not all(p.matching_status.matching for p in publishers.values()):
+    while args.wait_for and not all(map(_matched, publishers.values())):
         if time.monotonic() > deadline:
-            unheard = [t for t, p in publishers.items() if not p.matching_status.matching]
+            unheard = [t for t, p in publishers.items() if not _matched(p)]
             raise ReplayError(f"nobody subscribes to {', '.join(unheard)}")
         time.sleep(0.05)
     time.sleep(args.settle)
@@ -160,7 +168,7 @@ def replay(session: zenoh.Session, keys: Keys, items: list[Item], args: argparse
                     time.sleep(wait)
             elif pacer is not None:
                 with answered:
-                    if not answered.wait_for(lambda it=item: pacer.may_send(it.k),
+                    if not answered.wait_for(partial(pacer.may_send, item.k),
                                              args.pace_timeout):
                         raise ReplayError(
                             f"no message on {args.pace_on} of tick {item.k - args.ahead} or "

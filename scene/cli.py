@@ -36,8 +36,7 @@ def main(argv: list[str] | None = None) -> int:
         except ConvertError as exc:
             print(f"btrack scene: {exc}", file=sys.stderr)
             return 2
-        counts["seconds"] = round(time.monotonic() - began, 2)
-        print(json.dumps(counts))
+        print(json.dumps({**counts, "seconds": round(time.monotonic() - began, 2)}))
         return 0
     from scene.render import draw, read_frame
 

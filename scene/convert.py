@@ -157,8 +157,8 @@ class Collected:
         for rows in (self.estimated, self.states):
             for row in rows.values():
                 ids.update(row)
-        for truth in self.truth.values():
-            ids.update(truth.robots)
+        for team in self.truth.values():
+            ids.update(team.robots)
         robots = build.team_size(ids, info)
         bodies: set[int] = set()
         for k in ks:

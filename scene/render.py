@@ -115,16 +115,14 @@ def draw(frame: Frame, out: str | Path, title: str = "") -> Path:
     if frame.segments is not None:
         for entity in frame.segments.entities:
             for j, line in enumerate(entity.lines):
-                style = {0: dict(lw=5, alpha=0.9), 1: dict(lw=1.5, ls="--"),
-                         2: dict(lw=1.0)}[min(j, 2)]
-                pts = list(line.points)
-                if line.type == line.LINE_LIST:
-                    for a, b in zip(pts[::2], pts[1::2], strict=True):
-                        ax.plot([a.x, b.x], [a.y, b.y], color=_rgba(line.color), zorder=3,
-                                **style)
-                else:
-                    ax.plot([p.x for p in pts], [p.y for p in pts], color=_rgba(line.color),
-                            zorder=3, **style)
+                # the stretch of the edge, the believed depth over it, its two ends
+                width, dash = ((5.0, "-"), (1.5, "--"), (1.0, "-"))[min(j, 2)]
+                pts = [(p.x, p.y) for p in line.points]
+                runs = ([pts[i:i + 2] for i in range(0, len(pts), 2)]
+                        if line.type == line.LINE_LIST else [pts])
+                for run in runs:
+                    ax.plot([x for x, _ in run], [y for _, y in run], color=_rgba(line.color),
+                            zorder=3, lw=width, ls=dash, alpha=0.9)
     frames = {}
     if frame.transforms is not None:
         frames = {tf.child_frame_id: tf for tf in frame.transforms.transforms}
