@@ -19,6 +19,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "report": ("report.cli", "measures, summary.json and figures from a recorded run"),
     "scene": ("scene.cli", "add Foxglove's channels to a recording, or draw them (--png)"),
     "replay": ("replay.process", "put a recording's messages back on the bus"),
+    "view": ("scene.live", "serve a running team to Foxglove over its WebSocket protocol"),
     "suite": ("deploy.suite", "the thesis's twelve cases, or general: random maps x teams"),
     "router": ("deploy.router", "a Zenoh router (the base station's), TLS and access control"),
     "deploy": ("deploy.cli", "a fleet's configurations, units and certificates from FLEET.toml"),

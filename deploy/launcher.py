@@ -117,6 +117,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also kill and restart, freeze and thaw random agents at random "
                    "times drawn from SEED")
     p.add_argument("--no-report", action="store_true", help="skip the report at the end")
+    p.add_argument("--live", nargs="?", type=int, const=8765, metavar="PORT",
+                   help="serve the team to Foxglove over its WebSocket protocol while it "
+                   "runs (btrack view) on ws://127.0.0.1:PORT (8765)")
     p.add_argument("--no-scene", action="store_true",
                    help="skip adding the Foxglove channels to the recording at the end")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
@@ -275,7 +278,8 @@ def _fail(group: ProcessGroup, child: Child, what: str) -> int:
 # What the hardware loop (--hil) does not do yet: refused by name there, never ignored.
 HIL_REFUSED = (("fault", "--fault"), ("chaos", "--chaos"), ("kidnap", "--kidnap"),
                ("odom_noise", "--odom-noise"), ("odom_turn_noise", "--odom-turn-noise"),
-               ("progress_every", "--progress-every"), ("scanners", "--scanners"))
+               ("progress_every", "--progress-every"), ("scanners", "--scanners"),
+               ("live", "--live"))
 
 
 def hil_refusal(args: argparse.Namespace) -> str | None:
@@ -304,6 +308,8 @@ def refusal(args: argparse.Namespace, bodies: int) -> str | None:
         return f"the team and the ids that join are {bodies} robots; at most {MAX_ROBOTS}"
     if args.port is not None and not 1 <= args.port <= 65535:
         return f"--port must be between 1 and 65535, not {args.port}"
+    if args.live is not None and not 1 <= args.live <= 65535:
+        return f"--live must be a port between 1 and 65535, not {args.live}"
     if not (math.isfinite(args.duration) and args.duration > 0):
         return f"--duration must be a positive number of seconds, not {args.duration:g}"
     if args.scanners is not None and not 1 <= args.scanners <= MAX_SCANNERS:
@@ -410,6 +416,13 @@ def run(args: argparse.Namespace) -> int:
                     return _fail(group, recorder, "failed to start")
                 if time.monotonic() - t_wall0 > STARTUP_S:
                     return _fail(group, recorder, f"did not come up within {STARTUP_S:g} s")
+            if args.live is not None:  # off the lockstep: a niced client of the router
+                group.start("view", ["view", "--port", str(args.live), "--ns", ns, "--mode",
+                                     "client", "--connect", hub, "--no-multicast"],
+                            nice=BACKGROUND_NICE)
+                print(f"btrack sim: live view on ws://127.0.0.1:{args.live} (Foxglove: Open "
+                      "connection, Foxglove WebSocket; layout docs/foxglove-layout.json)")
+
             def agent_args(i: int) -> list[str]:
                 team = args.robots if i < args.robots else bodies
                 return ["agent", "--id", str(i), "--robots", str(team),

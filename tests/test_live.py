@@ -1,0 +1,81 @@
+"""Issue 20, item 2: ``btrack sim --live`` serves the team on the Foxglove WebSocket
+protocol while it runs; a real client of that protocol (its own library,
+@foxglove/ws-protocol, in node) connects, subscribes, and gets the scene and the scans."""
+
+from __future__ import annotations
+
+import base64
+import json
+import shutil
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from foxglove_schemas_protobuf.LaserScan_pb2 import LaserScan
+from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
+
+from tests.procutil import end, end_children_of_run, free_port
+
+CLIENT = Path(__file__).parent / "foxglove_client"
+TOPICS = ("/scene/map", "/scene/segments", "/scene/robots", "/scan/0", "/tf",
+          "/poses/estimated", "/plot/errors")
+
+
+@pytest.fixture(scope="module")
+def client_installed():
+    if shutil.which("node") is None or shutil.which("npm") is None:
+        pytest.skip("node and npm are needed for the Foxglove WebSocket client")
+    if not (CLIENT / "node_modules" / "@foxglove" / "ws-protocol").is_dir():
+        res = subprocess.run(["npm", "install", "--no-audit", "--no-fund", "--silent"],
+                             cwd=CLIENT, capture_output=True, text=True, timeout=300)
+        assert res.returncode == 0, res.stderr[-2000:]
+    return CLIENT / "client.mjs"
+
+
+def _listening(port: int) -> bool:
+    with socket.socket() as s:
+        return s.connect_ex(("127.0.0.1", port)) == 0
+
+
+def test_a_foxglove_client_watches_the_team_as_it_runs(client_installed, tmp_path):
+    out, port = tmp_path / "live", free_port()
+    sim = subprocess.Popen(
+        [sys.executable, "-m", "btrack", "sim", "--robots", "2", "--duration", "60",
+         "--live", str(port), "--quiet", "--no-report", "--no-scene", "--out", str(out)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 60
+        while not _listening(port):
+            assert sim.poll() is None, sim.communicate()[1][-2000:]
+            assert time.monotonic() < deadline, "the live view never listened"
+            time.sleep(0.1)
+        client = subprocess.run(
+            ["node", str(client_installed), f"ws://127.0.0.1:{port}", ",".join(TOPICS), "5",
+             "60"], capture_output=True, text=True, timeout=90)
+        watched_while_running = sim.poll() is None
+        stdout, stderr = sim.communicate(timeout=240)
+    finally:
+        end(sim)
+        end_children_of_run(out)
+    assert client.returncode == 0, (client.stdout[-2000:], client.stderr[-2000:])
+    assert sim.returncode == 0, stderr[-2000:]
+    assert watched_while_running, "the client got its messages only after the run"
+    seen = json.loads(client.stdout)
+    assert set(seen) == set(TOPICS)
+    for topic in TOPICS:
+        assert seen[topic]["messages"] >= 5, (topic, seen[topic]["messages"])
+    assert seen["/scan/0"]["schemaName"] == "foxglove.LaserScan"
+    scan = LaserScan.FromString(base64.b64decode(seen["/scan/0"]["first"]))
+    assert scan.frame_id == "world" and len(scan.ranges) == 361 and sum(scan.intensities) > 0
+    segments = SceneUpdate.FromString(base64.b64decode(seen["/scene/segments"]["first"]))
+    assert {e.id for e in segments.entities} == {"segment/0", "segment/1"}
+    scene_map = SceneUpdate.FromString(base64.b64decode(seen["/scene/map"]["first"]))
+    assert scene_map.entities[0].id == "map" and scene_map.entities[0].triangles
+    assert seen["/plot/errors"]["encoding"] == "json"
+    view = json.loads((out / "logs" / "view.out").read_text().splitlines()[-1])
+    assert view["frames"] > 10 and view["dropped"] == 0
+    recorder = json.loads((out / "logs" / "recorder.out").read_text().splitlines()[-1])
+    assert recorder["ticks"] == 600 and recorder["done"]  # the run lost nothing to it
