@@ -86,7 +86,7 @@ def run_team_sizes(args: argparse.Namespace, loc: str) -> None:
                 subprocess.run(
                     [sys.executable, "-m", "btrack", "sim", "--robots", str(n), "--map",
                      args.map, "--localization", loc, "--duration", str(args.duration),
-                     "--out", str(out), "--quiet", "--no-report"],
+                     "--out", str(out), "--quiet", "--no-report", "--no-scene"],
                     check=True, stdout=subprocess.DEVNULL,
                 )
                 commands.append(time.monotonic() - began)
