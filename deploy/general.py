@@ -157,7 +157,7 @@ def _bus_args(case: GeneralCase, out: Path, localization: str,
     return [sys.executable, "-m", "btrack", "sim", "--robots", str(case.robots), "--map",
             case.map, "--start", case.start, "--duration", repr(case.duration_s), "--seed",
             str(case.seed), "--localization", localization, "--out", str(out), "--quiet",
-            *(["--config", config] if config else [])]
+            "--no-scene", *(["--config", config] if config else [])]
 
 
 def run_bus(cases: list[GeneralCase], out: Path, localization: str, jobs: int,

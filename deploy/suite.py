@@ -87,7 +87,8 @@ def default_jobs() -> int:
 def _sim_args(args: argparse.Namespace, case: Case) -> list[str]:
     out = [sys.executable, "-m", "btrack", "sim", "--robots", "3", "--map", case.map,
            "--start", case.start, "--duration", repr(args.duration), "--seed",
-           str(args.seed), "--out", str(case.out), "--quiet"]
+           str(args.seed), "--out", str(case.out), "--quiet",
+           "--no-scene"]  # measures only; btrack scene CASE_DIR adds the Foxglove view
     if args.localization:
         out += ["--localization", args.localization]
     if args.config:

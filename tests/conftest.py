@@ -14,7 +14,7 @@ def pf_run(tmp_path_factory):
     tests/test_replay.py replays it)."""
     out = tmp_path_factory.mktemp("fox") / "pf"
     result = run_sim(out, "--robots", "2", "--duration", "20", "--scanners", "2",
-                     "--seed", "3", timeout=240)
+                     "--seed", "3", timeout=240, scene=True)
     assert result.returncode == 0, result.stderr[-3000:]
     assert "Foxglove channels added" in result.stdout, result.stdout[-2000:]
     return out

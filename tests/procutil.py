@@ -80,13 +80,14 @@ def pid_alive(pid: int) -> bool:
         return False
 
 
-def run_sim(out: Path, *extra: str, timeout: float = 400,
-            quiet: bool = True) -> subprocess.CompletedProcess[str]:
+def run_sim(out: Path, *extra: str, timeout: float = 400, quiet: bool = True,
+            scene: bool = False) -> subprocess.CompletedProcess[str]:
     """``btrack sim --out OUT [--quiet] EXTRA...`` to its end; every process it started
-    is ended whatever happens."""
+    is ended whatever happens. Without ``scene`` the run skips the Foxglove channels
+    (``--no-scene``): the tests that measure a run do not pay for its view."""
     proc = subprocess.Popen(
         [sys.executable, "-m", "btrack", "sim", "--out", str(out),
-         *(["--quiet"] if quiet else []), *extra],
+         *(["--quiet"] if quiet else []), *([] if scene else ["--no-scene"]), *extra],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
     )
     try:

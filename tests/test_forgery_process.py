@@ -42,7 +42,7 @@ def runs(tmp_path_factory):
     ns, port, out = unique_ns(), free_port(), root / "attacked"
     sim = subprocess.Popen(
         [sys.executable, "-m", "btrack", "sim", "--out", str(out), "--quiet", *DURATION,
-         "--ns", ns, "--port", str(port)],
+         "--ns", ns, "--port", str(port), "--no-scene"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     forger = None
     try:

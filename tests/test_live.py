@@ -79,3 +79,11 @@ def test_a_foxglove_client_watches_the_team_as_it_runs(client_installed, tmp_pat
     assert view["frames"] > 10 and view["dropped"] == 0
     recorder = json.loads((out / "logs" / "recorder.out").read_text().splitlines()[-1])
     assert recorder["ticks"] == 600 and recorder["done"]  # the run lost nothing to it
+
+
+def test_view_refuses_what_it_cannot_join(tmp_path):
+    for args in (["--run", str(tmp_path / "no-run")], ["--ns", "a b"], ["--port", "70000"]):
+        res = subprocess.run([sys.executable, "-m", "btrack", "view", *args],
+                             capture_output=True, text=True, timeout=60)
+        assert res.returncode == 2, res.stderr
+        assert res.stderr.startswith("btrack view: ") and "Traceback" not in res.stderr

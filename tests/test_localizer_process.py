@@ -95,7 +95,7 @@ def test_team_with_pf_recovers_a_kidnapped_robot(tmp_path: Path) -> None:
     out = tmp_path / "run"
     proc = start(["sim", "--duration", "45", "--map", "no-algae", "--start", "in-phase",
                   "--kidnap", "0@25:0,1",
-                  "--out", str(out), "--quiet"], tmp_path / "sim.log")
+                  "--out", str(out), "--quiet", "--no-scene"], tmp_path / "sim.log")
     try:
         proc.wait(180)
     finally:

@@ -101,7 +101,7 @@ def test_the_same_seed_gives_the_same_run_even_side_by_side(tmp_path):
     procs = [subprocess.Popen(
         [sys.executable, "-m", "btrack", "sim", "--robots", "3", "--map", "random-algae",
          "--start", "in-phase", "--localization", "truth", "--duration", "40", "--out",
-         str(out), "--quiet"],
+         str(out), "--quiet", "--no-scene"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
     ) for out in outs]
     try:

@@ -56,6 +56,7 @@ def _refused(tmp_path: Path, capsys: pytest.CaptureFixture[str], *argv: str) -> 
     (["--map", "no-such-map"], "--map: unknown map 'no-such-map'"),
     (["--scanners", "0"], "--scanners must be between 1 and 16, not 0"),
     (["--scanners", "2", "--localization", "truth"], "--scanners: the laser scans only"),
+    (["--live", "70000"], "--live must be a port between 1 and 65535, not 70000"),
 ])
 def test_sim_refuses_by_name_before_starting_anything(tmp_path, capsys, argv, expected):
     assert expected in _refused(tmp_path, capsys, *argv)
@@ -69,6 +70,7 @@ def test_sim_refuses_by_name_before_starting_anything(tmp_path, capsys, argv, ex
     (["--hil", "--localization", "pf"], "--localization pf: not with --hil"),
     (["--hil", "--boot-s", "2"], "--boot-s: not with --hil"),
     (["--hil", "--scanners", "2"], "--scanners: not with --hil"),
+    (["--hil", "--live"], "--live: not with --hil"),
     (["--hil-faults", "0.1"], "--hil-faults needs --hil"),
 ])
 def test_options_the_hardware_loop_would_ignore_are_refused_by_name(tmp_path, capsys, argv,
