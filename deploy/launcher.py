@@ -474,12 +474,7 @@ def run(args: argparse.Namespace) -> int:
         group.stop_all()
     wall = time.monotonic() - t_wall0
     print(f"\nbtrack sim: run finished in {wall:.1f} s wall; recording {out / 'run.mcap'}")
-    # The Foxglove channels are made from the finished recording (scene.convert), not
-    # by the recorder on the lockstep's cores; in a process of its own, beside the
-    # report, which reads the raw channels either way.
-    scene = None if args.no_scene else subprocess.Popen(
-        [sys.executable, "-m", "btrack", "scene", str(out)], stdin=subprocess.DEVNULL,
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    scene = start_scene(out, args.no_scene)
     try:
         if not args.no_report:
             from report.cli import make_report
@@ -487,19 +482,38 @@ def run(args: argparse.Namespace) -> int:
             summary = make_report(out)
             print(json.dumps(summary, indent=2))
             print(f"btrack sim: report in {out / 'report.md'}")
-        if scene is not None:
-            stdout, stderr = scene.communicate()
-            if scene.returncode == 0:
-                print(f"btrack sim: Foxglove channels added to {out / 'run.mcap'} "
-                      f"{stdout.strip()} (layout: docs/foxglove-layout.json)")
-            else:
-                print(f"btrack sim: no Foxglove channels: {stderr.strip()[-500:]}",
-                      file=sys.stderr)
     finally:
-        if scene is not None and scene.poll() is None:
-            scene.kill()  # ours, by its pid: an interrupted run leaves the raw recording
-            scene.wait()
+        finish_scene(scene, out, "btrack sim")
     return 0
+
+
+def start_scene(out: Path, skip: bool) -> subprocess.Popen[str] | None:
+    """The Foxglove channels are made from the finished recording (scene.convert), not
+    by the recorder on the lockstep's cores: ``btrack scene OUT`` in a process of its
+    own, beside the report, which reads the raw channels either way."""
+    if skip:
+        return None
+    return subprocess.Popen(
+        [sys.executable, "-m", "btrack", "scene", str(out)], stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+
+
+def finish_scene(scene: subprocess.Popen[str] | None, out: Path, who: str) -> None:
+    """Wait for ``start_scene``'s process and say how it went; on an interruption end
+    it (ours, by its pid), which leaves the raw recording as it was."""
+    if scene is None:
+        return
+    try:
+        stdout, stderr = scene.communicate()
+    finally:
+        if scene.poll() is None:
+            scene.kill()
+            scene.wait()
+    if scene.returncode == 0:
+        print(f"{who}: Foxglove channels added to {out / 'run.mcap'} {stdout.strip()} "
+              "(layout: docs/foxglove-layout.json)")
+    else:
+        print(f"{who}: no Foxglove channels: {stderr.strip()[-500:]}", file=sys.stderr)
 
 
 def _watch(args: argparse.Namespace, group: ProcessGroup, monitor: Monitor, world: Child,
