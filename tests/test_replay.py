@@ -98,3 +98,33 @@ def test_replay_refuses_what_it_cannot_read(tmp_path):
                              capture_output=True, text=True, timeout=60)
         assert res.returncode == 2, res.stderr
         assert "btrack replay:" in res.stderr and "Traceback" not in res.stderr
+
+
+def test_a_replay_at_the_recorded_pace_keeps_the_order(pf_run, tmp_path):
+    """--speed: the recorded pace, scaled; every message, in the recorder's order."""
+    ns, port = unique_ns(), free_port()
+    out = tmp_path / "paced"
+    recorder = start(["record", "--out", str(out), "--ns", ns, "--mode", "router",
+                      "--listen", f"tcp/127.0.0.1:{port}", "--no-multicast"],
+                     log=tmp_path / "recorder.log")
+    try:
+        wait_for(lambda: _listening(port), 30, "the recorder's router")
+        replay = subprocess.run(
+            [sys.executable, "-m", "btrack", "replay", str(pf_run), "--speed", "8",
+             "--topics", "world/tick", "laser/scan", "agent/*/state",
+             "--wait-for", "alive/recorder", "--ns", ns, "--mode", "client", "--connect",
+             f"tcp/127.0.0.1:{port}", "--no-multicast"],
+            capture_output=True, text=True, timeout=120)
+        assert replay.returncode == 0, replay.stderr[-3000:]
+        assert recorder.wait(60) == 0, (tmp_path / "recorder.log").read_text()[-2000:]
+    finally:
+        end(recorder)
+
+    def sequence(path):
+        with open(path, "rb") as f:
+            return [(c.topic, json.loads(m.data)["k"])
+                    for _, c, m in make_reader(f).iter_messages(log_time_order=True)
+                    if c.topic in ("world/tick", "laser/scan") or c.topic.endswith("/state")]
+
+    original, again = sequence(pf_run / "run.mcap"), sequence(out / "run.mcap")
+    assert again == original and len(original) == 200 + 400 + 400
