@@ -23,12 +23,15 @@ The steps of ``Localizer.step`` (one scan):
    (eq. 5.3), and systematic resampling (the thesis's correction step) when the
    effective sample size 1 / sum(w^2) falls below ``resample_below`` * N. A robot
    without a measurement (occluded) keeps its prediction.
-5. Recovery: the filters start with no pose (particles drawn over the scanner's
-   field of view). A robot whose filter has had no measurement for ``lost_after``
-   scans while a robot-shaped blob is left unassigned is re-seeded around that
-   blob (a kidnapped robot); at the start, with every robot lost, robots take the
-   blobs in the order of the edge (robot 0 leftmost), which is the order of the
-   team's initial segments.
+5. Recovery: the filters start with no pose (particles drawn over the scanners'
+   fields of view); on the first scan the robots take the blobs in the order of the
+   edge (robot 0 leftmost), which is the order of the team's initial segments. A
+   robot whose filter has had no measurement for ``lost_after`` scans is re-seeded
+   on a blob no robot took (a kidnapped robot, or one that was hidden): the nearest
+   claimant first, each within a reach that grows with the scans it has been lost,
+   and never on a blob whose motion its odometry contradicts (a blob standing
+   still is no robot that drove: a robot parked in view, waiting to join, is not
+   taken for a driving one that was hidden behind it at the start).
 
 Heading is never measured: it comes from odometry and from which headings carry
 the particles to where the scans see the robot.
@@ -40,6 +43,7 @@ numbers come from a seeded numpy Generator owned by the ``Localizer``.
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -71,6 +75,17 @@ class FilterConfig:
     fit_rms_m: float = 0.03  # a blob whose circle fit is worse than this is not a robot
     gate_m: float = 0.25  # a centre farther than this from a prediction is not that robot
     lost_after: int = 3  # scans without a measurement before a free blob may re-seed
+    # A lost robot may re-seed on a free blob this far from its prediction, and this much
+    # farther per scan it has been lost: an occluded robot does not jump to a stranger
+    # across the scene, a kidnapped one is found within a few scans of its new place.
+    reseed_reach_m: float = 0.25
+    reseed_growth_m: float = 0.1
+    # A free blob that stood still (within still_m) over the last still_scans scans is
+    # not a robot whose odometry says it drove more than moved_m meanwhile (a robot
+    # parked in view, waiting to join, is no lost robot that is driving).
+    still_scans: int = 10
+    still_m: float = 0.02
+    moved_m: float = 0.05
     reseed_std_m: float = 0.02
     reseed_heading_std_rad: float = 0.2  # around the filter's own heading
     reseed_uniform_frac: float = 0.2  # of re-seeded particles with any heading
@@ -349,6 +364,9 @@ class Localizer:
         self.started = np.zeros(robots, dtype=bool)  # has had a pose at all
         self.missed = np.zeros(robots, dtype=int)  # scans since the last measurement
         self.drawn = False
+        # the last scans' centres and every robot's odometry distance, for still blobs
+        self._recent_centres: deque[np.ndarray] = deque(maxlen=self.config.still_scans)
+        self._recent_motion: deque[np.ndarray] = deque(maxlen=self.config.still_scans)
         self.resampled = 0  # resampling events so far (all robots)
         self.reseeded = 0  # recoveries so far
 
@@ -443,8 +461,18 @@ class Localizer:
         self.reseeded += 1
 
     def recover(self, centres: np.ndarray, used: np.ndarray) -> None:
-        """Re-seed lost robots from robot-shaped blobs no robot took."""
-        lost = np.flatnonzero(~self.started | (self.missed >= self.config.lost_after))
+        """Re-seed lost robots from robot-shaped blobs no robot took. With nobody
+        started, robots take the blobs in the order of the edge. Otherwise the lost
+        robots that had a pose take the free blobs nearest their predictions first
+        (pairs by distance over all of them, not robot by robot), each within its
+        reach (``reseed_reach_m`` plus ``reseed_growth_m`` per scan lost), and never a
+        blob that stood still while its odometry drove (nor, for one never seeded, a
+        blob that moved while it stood: ``still_blobs``, ``moved``); a robot
+        unmeasured for fewer scans than ``lost_after`` takes part too, holding the
+        blob it is nearest without re-seeding on it; robots never seeded take what is
+        left in the order of the edge."""
+        c = self.config
+        lost = np.flatnonzero(~self.started | (self.missed >= c.lost_after))
         free = [j for j in range(centres.shape[0]) if not used[j]]
         if lost.size == 0 or not free:
             return
@@ -454,16 +482,67 @@ class Localizer:
             for robot, j in zip(lost.tolist(), order, strict=False):
                 self.reseed(robot, centres[j])
             return
+        still = self.still_blobs(centres)
+        moved = self.moved()
+        known = len(self._recent_centres) == c.still_scans  # enough scans to tell
+
+        def fits(robot: int, j: int) -> bool:
+            """A blob that stood still is not a robot that drove; nor is one that moved
+            a robot never seeded whose odometry stood (one parked, waiting to join).
+            A robot with a pose may take a moving blob though its odometry stood: its
+            wheels may be what failed."""
+            if not known:
+                return True
+            if still[j]:
+                return not moved[robot]
+            return bool(self.started[robot] or moved[robot])
+
         predicted = self.mean_positions()
-        for robot in lost.tolist():
-            if not free:
-                break
-            if self.started[robot]:
-                j = min(free, key=lambda j: float(np.hypot(*(centres[j] - predicted[robot]))))
-            else:
-                j = min(free, key=lambda j: float(centres[j, 0]))
+        pairs = []
+        # every robot that went unmeasured claims; one not lost yet only holds its blob
+        for robot in np.flatnonzero(self.started & (self.missed > 0)).tolist():
+            reach = c.reseed_reach_m + c.reseed_growth_m * float(self.missed[robot])
+            for j in free:
+                d = float(np.hypot(*(centres[j] - predicted[robot])))
+                if d <= reach and fits(robot, j):
+                    pairs.append((d, robot, j))
+        taken: set[int] = set()
+        for _, robot, j in sorted(pairs):
+            if robot in taken or j not in free:
+                continue
+            free.remove(j)
+            taken.add(robot)
+            if self.missed[robot] >= c.lost_after:
+                self.reseed(robot, centres[j])
+        for robot in lost[~self.started[lost]].tolist():
+            fitting = [j for j in free if fits(robot, j)]
+            if not fitting:
+                continue
+            j = min(fitting, key=lambda j: float(centres[j, 0]))
             free.remove(j)
             self.reseed(robot, centres[j])
+
+    def still_blobs(self, centres: np.ndarray) -> np.ndarray:
+        """For each centre of this scan, whether a centre lay within ``still_m`` of it in
+        every one of the last ``still_scans`` scans (this one included)."""
+        c = self.config
+        out = np.full(centres.shape[0], True)
+        for earlier in self._recent_centres:
+            if not out.any():
+                break
+            if earlier.shape[0] == 0:
+                return np.zeros(centres.shape[0], dtype=bool)
+            d = np.hypot(centres[:, None, 0] - earlier[None, :, 0],
+                         centres[:, None, 1] - earlier[None, :, 1])
+            out &= d.min(axis=1) <= c.still_m
+        return out
+
+    def moved(self) -> np.ndarray:
+        """Whether each robot's odometry drove more than ``moved_m`` over the last
+        ``still_scans`` scans."""
+        if not self._recent_motion:
+            return np.zeros(self.robots, dtype=bool)
+        return np.sum(self._recent_motion, axis=0) > self.config.moved_m
 
     # output ----------------------------------------------------------------------
     def estimate_row(self, robot: int) -> tuple[float, float, float, float, float, float]:
@@ -502,6 +581,8 @@ class Localizer:
         self.missed = np.where(has, 0, self.missed + 1)
         used = np.zeros(centres.shape[0], dtype=bool)
         used[match[has]] = True
+        self._recent_centres.append(centres)
+        self._recent_motion.append(np.abs(np.asarray(dist, dtype=float)))
         self.recover(centres, used)
         return self.estimates(has)
 
