@@ -30,11 +30,17 @@ def assign(predicted: np.ndarray, candidates: np.ndarray, active: np.ndarray,
 
 @dataclass(frozen=True)
 class Recovery:
-    """How lost robots are matched to free blobs (``recovery``); see FilterConfig."""
+    """How lost robots are matched to free blobs (``recovery``)."""
 
-    lost_after: int = 3
+    lost_after: int = 3  # scans without a measurement before a free blob may re-seed
+    # A lost robot may re-seed on a free blob this far from its prediction, and this much
+    # farther per scan it has been lost: an occluded robot does not jump to a stranger
+    # across the scene, a kidnapped one is found within a few scans of its new place.
     reach_m: float = 0.25
     growth_m: float = 0.1
+    # A free blob that stood still (within still_m) over the last still_scans scans is
+    # not a robot whose odometry says it drove more than moved_m meanwhile (a robot
+    # parked in view, waiting to join, is no lost robot that is driving).
     still_scans: int = 10
     still_m: float = 0.02
     moved_m: float = 0.05

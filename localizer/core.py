@@ -44,7 +44,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -71,11 +71,7 @@ class FilterConfig:
     particles: int = 1000
     radius_m: float = 0.17  # robot radius (iRobot Create)
     meas_std_m: float = 0.02  # std of a measured centre, per axis (likelihood)
-    odom_dist_frac: float = 0.05  # std of driven distance per metre driven
-    odom_dist_floor_m: float = 0.002  # std of driven distance per period
-    odom_turn_frac: float = 0.05  # std of turn per radian turned
-    odom_turn_per_m: float = 0.05  # std of turn per metre driven, rad/m
-    odom_turn_floor_rad: float = 0.004  # std of turn per period
+    motion: OdometryMotion = field(default_factory=OdometryMotion)  # the odometry's noise
     resample_below: float = 0.5  # resample when N_eff < this fraction of N
     jitter_m: float = 0.001  # roughening after resampling, per axis
     jitter_rad: float = 0.005
@@ -84,18 +80,7 @@ class FilterConfig:
     width_margin_m: float = 0.06  # a blob wider than 2 r + this is not a robot
     fit_rms_m: float = 0.03  # a blob whose circle fit is worse than this is not a robot
     gate_m: float = 0.25  # a centre farther than this from a prediction is not that robot
-    lost_after: int = 3  # scans without a measurement before a free blob may re-seed
-    # A lost robot may re-seed on a free blob this far from its prediction, and this much
-    # farther per scan it has been lost: an occluded robot does not jump to a stranger
-    # across the scene, a kidnapped one is found within a few scans of its new place.
-    reseed_reach_m: float = 0.25
-    reseed_growth_m: float = 0.1
-    # A free blob that stood still (within still_m) over the last still_scans scans is
-    # not a robot whose odometry says it drove more than moved_m meanwhile (a robot
-    # parked in view, waiting to join, is no lost robot that is driving).
-    still_scans: int = 10
-    still_m: float = 0.02
-    moved_m: float = 0.05
+    recovery: Recovery = field(default_factory=Recovery)  # which free blob a lost robot takes
     reseed_std_m: float = 0.02
     reseed_heading_std_rad: float = 0.2  # around the filter's own heading
     reseed_uniform_frac: float = 0.2  # of re-seeded particles with any heading
@@ -121,7 +106,7 @@ class Estimate:
     var_y: float
     var_theta: float
     measured: bool  # a blob was assigned to this robot in this scan
-    lost: bool  # no pose yet, or no measurement for ``lost_after`` scans
+    lost: bool  # no pose yet, or no measurement for ``Recovery.lost_after`` scans
 
 
 # --- the particle filter --------------------------------------------------------------
@@ -150,12 +135,9 @@ class Localizer:
         if robots < 1:
             raise ValueError("need at least one robot")
         self.config = c = config or FilterConfig()
-        self.motion = motion or OdometryMotion(c.odom_dist_frac, c.odom_dist_floor_m,
-                                               c.odom_turn_frac, c.odom_turn_per_m,
-                                               c.odom_turn_floor_rad)
+        self.motion = motion or c.motion
         self.sensor = sensor or CentreSensor(c.meas_std_m)
-        self.rules = Recovery(c.lost_after, c.reseed_reach_m, c.reseed_growth_m,
-                              c.still_scans, c.still_m, c.moved_m)
+        self.rules = c.recovery
         self.robots = robots
         self.rng = np.random.default_rng(seed)
         n = self.config.particles
@@ -167,8 +149,8 @@ class Localizer:
         self.missed = np.zeros(robots, dtype=int)  # scans since the last measurement
         self.drawn = False
         # the last scans' centres and every robot's odometry distance, for still blobs
-        self._recent_centres: deque[np.ndarray] = deque(maxlen=self.config.still_scans)
-        self._recent_motion: deque[np.ndarray] = deque(maxlen=self.config.still_scans)
+        self._recent_centres: deque[np.ndarray] = deque(maxlen=self.rules.still_scans)
+        self._recent_motion: deque[np.ndarray] = deque(maxlen=self.rules.still_scans)
         self.resampled = 0  # resampling events so far (all robots)
         self.reseeded = 0  # recoveries so far
 
@@ -312,7 +294,7 @@ class Localizer:
         vy = (w * (self.y - my[:, None]) ** 2).sum(axis=1)
         # heading variance of a wrapped normal from the mean resultant length R
         vth = -2.0 * np.log(np.clip(np.hypot(s, c), 1e-12, 1.0))
-        lost = ~self.started | (self.missed >= self.config.lost_after)
+        lost = ~self.started | (self.missed >= self.rules.lost_after)
         rows = zip(mx.tolist(), my.tolist(), mth.tolist(), vx.tolist(), vy.tolist(),
                    vth.tolist(), measured.tolist(), lost.tolist(), strict=True)
         return [Estimate(*row) for row in rows]
