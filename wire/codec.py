@@ -100,6 +100,12 @@ def decode(cls: type[T], payload: bytes) -> T:
         raw = msgpack.unpackb(payload, raw=False, strict_map_key=True)
     except Exception as exc:  # msgpack raises several unrelated types on garbage
         raise DecodeError(f"not msgpack: {exc}") from None
+    return from_mapping(cls, raw)
+
+
+def from_mapping(cls: type[T], raw: Any) -> T:
+    """Validate a decoded map (msgpack's, or a recording's JSON) as a ``cls`` message,
+    as ``decode`` does, or raise ``DecodeError``."""
     if not isinstance(raw, dict):
         raise DecodeError(f"expected a map, got {type(raw).__name__}")
     spec: Any = cls  # a dataclass type, hashable for the caches
@@ -130,3 +136,21 @@ def decode(cls: type[T], payload: bytes) -> T:
     except InvalidMessage as exc:
         raise DecodeError(str(exc)) from None
     return msg
+
+
+def from_record(cls: type[T], raw: Any) -> T:
+    """A message as recorded (a map the recorder had validated as ``cls`` when it
+    arrived): the dataclass, its fields by name, without validating each value again.
+    A map with a field ``cls`` does not have, or without one it needs, raises
+    ``DecodeError`` (a recording of an older or newer contract)."""
+    if not isinstance(raw, dict):
+        raise DecodeError(f"expected a map, got {type(raw).__name__}")
+    spec: Any = cls
+    names = _plan(spec)[1]
+    if raw.keys() != names:
+        missing = _required(spec) - raw.keys()
+        extra = raw.keys() - names
+        if missing or extra:
+            raise DecodeError(f"fields not of {cls.__name__}: missing {sorted(missing)}, "
+                              f"unknown {sorted(map(str, extra))}")
+    return cls(**raw)
