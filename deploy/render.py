@@ -182,7 +182,7 @@ def access_control(fleet: Fleet) -> dict[str, Any]:
     for role in fleet.base_roles:
         grant(role, Fleet.common_name(role), role_rules(ns, role))
     for r in fleet.robots:
-        grant(f"robot{r.id}", Fleet.common_name(r.id),
+        grant(f"robot{r.id}", Fleet.common_name(r.id, r.generation),
               robot_rules(ns, r.id, bridge=fleet.base.world == "hardware"))
     return {"enabled": True, "default_permission": "deny", "rules": rules,
             "subjects": subjects, "policies": policies}
