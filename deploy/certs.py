@@ -135,6 +135,21 @@ def make_fleet_certs(fleet: Fleet, out: Path, flat: bool = False) -> list[Path]:
         written += [d / pem, d / key]
     for r in fleet.robots:
         d = host_dir(r.host)
-        make_cert(ca, d / r.cert, d / r.key, Fleet.common_name(r.id), (r.host,))
+        make_cert(ca, d / r.cert, d / r.key, Fleet.common_name(r.id, r.generation), (r.host,))
         written += [d / tls.ca, d / r.cert, d / r.key]
     return written
+
+
+def reissue_robot_cert(fleet: Fleet, out: Path, rid: int, flat: bool = False) -> list[Path]:
+    """Robot ``rid``'s certificate again, from the CA ``make_fleet_certs`` left in
+    ``out/ca/``, under the common name of its generation in ``fleet``: after raising
+    the robot's ``generation`` (to revoke a stolen or lost key), this is the only
+    certificate of that robot the re-rendered router accepts."""
+    ca = (out / "ca" / "ca.pem", out / "ca" / "ca.key")
+    if not ca[0].is_file() or not ca[1].is_file():
+        raise CertError(f"no CA in {out / 'ca'}: make the fleet's certificates first")
+    r = fleet.robot(rid)
+    d = out if flat else out / r.host / fleet.tls.dir.strip("/")
+    d.mkdir(parents=True, exist_ok=True)
+    make_cert(ca, d / r.cert, d / r.key, Fleet.common_name(r.id, r.generation), (r.host,))
+    return [d / r.cert, d / r.key]

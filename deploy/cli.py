@@ -13,7 +13,7 @@ import dataclasses
 import sys
 from pathlib import Path
 
-from deploy.fleet import FleetError, load
+from deploy.fleet import Fleet, FleetError, load
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -36,6 +36,10 @@ def build_parser() -> argparse.ArgumentParser:
                        "host's certificate and key under OUT/<host>/<tls dir>/.")
     c.add_argument("fleet", metavar="FLEET.toml")
     c.add_argument("--out", required=True, type=Path, metavar="DIR")
+    c.add_argument("--robot", type=int, metavar="ID",
+                   help="only robot ID's certificate, again, from the CA already in "
+                   "OUT/ca/, for the generation the fleet file gives it (to revoke its "
+                   "last one: raise its generation, re-render, restart the router)")
     return p
 
 
@@ -59,9 +63,18 @@ def main(argv: list[str] | None = None) -> int:
         print(f"btrack deploy: {len(written)} files for {', '.join(hosts)} in {args.out}; "
               f"next steps in {args.out / 'INSTALL.md'}")
         return 0
-    from deploy.certs import CertError, make_fleet_certs
+    from deploy.certs import CertError, make_fleet_certs, reissue_robot_cert
 
     try:
+        if args.robot is not None:
+            if args.robot not in {r.id for r in fleet.robots}:
+                print(f"btrack deploy: no robot {args.robot} in {args.fleet}", file=sys.stderr)
+                return 2
+            written = reissue_robot_cert(fleet, args.out, args.robot)
+            r = fleet.robot(args.robot)
+            print(f"btrack deploy: robot {r.id}'s certificate, generation {r.generation} "
+                  f"({Fleet.common_name(r.id, r.generation)}), in {written[0].parent}")
+            return 0
         written = make_fleet_certs(fleet, args.out)
     except CertError as exc:
         print(f"btrack deploy: {exc}", file=sys.stderr)

@@ -55,6 +55,9 @@ class Robot:
     agent_args: tuple[str, ...] = ()
     port: str = "/dev/ttyUSB0"  # hardware: its Create's serial device
     bridge_args: tuple[str, ...] = ()  # hardware: more for its btrack bridge create
+    # Which issue of its certificate the router accepts: raised to revoke the last one
+    # (a stolen key), it names the next certificate apart from every earlier one.
+    generation: int = 1
 
 
 @dataclass(frozen=True)
@@ -132,12 +135,15 @@ class Fleet:
         return files
 
     @staticmethod
-    def common_name(who: int | str | None) -> str:
-        """The certificate common name of robot ``who`` (an id), of a base station
-        process (a role of ``base_roles``), or (None) of the router."""
+    def common_name(who: int | str | None, generation: int = 1) -> str:
+        """The certificate common name of robot ``who`` (an id) in its ``generation``
+        (the first has no suffix, the n-th ``-gN``), of a base station process (a role
+        of ``base_roles``), or (None) of the router."""
         if who is None:
             return "btrack-base"
-        return f"btrack-robot-{who}" if isinstance(who, int) else f"btrack-{who}"
+        if isinstance(who, int):
+            return f"btrack-robot-{who}" + (f"-g{generation}" if generation > 1 else "")
+        return f"btrack-{who}"
 
 
 # --- loading ---------------------------------------------------------------------------
@@ -324,6 +330,8 @@ def parse(text: str, source: str = "fleet.toml") -> Fleet:
             agent_args=r.get("agent_args", tuple, ()),
             port=r.get("port", str, "/dev/ttyUSB0", check=_abs),
             bridge_args=r.get("bridge_args", tuple, ()),
+            generation=r.get("generation", int, 1,
+                             check=lambda v: None if v >= 1 else "must be >= 1"),
         )
         r.done()
         if any(o.id == rid for o in robots):

@@ -1,34 +1,36 @@
-"""The localizer's pure core: laser scan -> robot centres -> one particle filter per robot.
+"""The localizer's pure core: laser scans -> robot centres -> one particle filter per robot.
 
-Thesis chapter 5 (the particle filter) and section 6.1.5 (laser localisation): one
-laser range finder behind the team sees the robots as arcs of circles; each robot's
-odometry drives its particle filter's prediction, and the centre measured from the
-scan weights the particles.
+Thesis chapter 5 (the particle filter) and section 6.1.5 (laser localisation): laser
+range finders behind the team see the robots as arcs of circles; each robot's odometry
+drives its particle filter's prediction, and the centre measured from the scans
+weights the particles.
 
-The steps of ``Localizer.step`` (one scan):
+Laid out as nav2's AMCL is: the measurement (``localizer.measure``: scan -> blobs ->
+centres), the data association (``localizer.associate``: which centre is which
+robot's, which free blob a lost robot takes), and the filter here, given its motion
+and sensor models as objects (``localizer.models``). The steps of
+``Localizer.step_scans`` (one tick, one scan per scanner):
 
-1. ``split_blobs``: consecutive returns closer than ``jump_m`` to each other form a
-   blob; misses (maximum range) and range jumps split blobs.
-2. ``blob_centre``: the nearest return of the blob plus the robot radius along its
-   bearing (thesis 6.1.5), refined by a least-squares fit of a circle of known
-   radius to all the blob's returns (the thesis's estimate is the start; the fit
-   removes the 0.25 degree bearing quantisation). Blobs wider than a robot or that
-   do not fit a circle (walls) are not robots.
-3. ``assign``: measured centres are matched to the robots' predicted positions by
-   minimum total squared distance, each pair gated at ``gate_m``; a blob that fits
-   no robot is ignored.
-4. The particle filter (algorithm 5.1), vectorised over robots and particles:
-   odometry prediction with Gaussian noise (eq. 5.2; here the noise grows with the
-   distance and turn of the period), a Gaussian likelihood of the measured centre
-   (eq. 5.3), and systematic resampling (the thesis's correction step) when the
-   effective sample size 1 / sum(w^2) falls below ``resample_below`` * N. A robot
-   without a measurement (occluded) keeps its prediction.
-5. Recovery: the filters start with no pose (particles drawn over the scanner's
-   field of view). A robot whose filter has had no measurement for ``lost_after``
-   scans while a robot-shaped blob is left unassigned is re-seeded around that
-   blob (a kidnapped robot); at the start, with every robot lost, robots take the
-   blobs in the order of the edge (robot 0 leftmost), which is the order of the
-   team's initial segments.
+1. Predict: every robot's particles by the motion model (``OdometryMotion``, eq. 5.2:
+   noise that grows with the distance and turn of the period).
+2. Measure: each scan's robot centres (``measure_centres``: the nearest return of a
+   blob plus the robot radius along its bearing, thesis 6.1.5, refined by a circle
+   fit), one per robot across the scanners (``merge_centres``).
+3. Associate: centres to the robots' predicted positions by minimum total squared
+   distance, each pair gated at ``gate_m`` (``assign``); a blob that fits no robot is
+   ignored, a robot without one (occluded) keeps its prediction.
+4. Update: the sensor model's likelihood of the measured centre (``CentreSensor``,
+   eq. 5.3), and systematic resampling (the thesis's correction step) when the
+   effective sample size 1 / sum(w^2) falls below ``resample_below`` * N.
+5. Recovery: the filters start with no pose (particles drawn over the scanners'
+   fields of view); on the first scan the robots take the blobs in the order of the
+   edge (robot 0 leftmost), which is the order of the team's initial segments. A
+   robot whose filter has had no measurement for ``lost_after`` scans is re-seeded
+   on a blob no robot took (a kidnapped robot, or one that was hidden): the nearest
+   claimant first, each within a reach that grows with the scans it has been lost,
+   and never on a blob whose motion its odometry contradicts (a blob standing
+   still is no robot that drove: a robot parked in view, waiting to join, is not
+   taken for a driving one that was hidden behind it at the start).
 
 Heading is never measured: it comes from odometry and from which headings carry
 the particles to where the scans see the robot.
@@ -40,14 +42,26 @@ numbers come from a seeded numpy Generator owned by the ``Localizer``.
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 from agent.phase import wrap_pi_array
+from localizer.associate import Recovery, assign, recovery, still_blobs
+from localizer.measure import (  # noqa: F401  (the measurement's API, re-exported)
+    ScanGeometry,
+    blob_centre,
+    blob_points,
+    blob_spans,
+    fit_circle,
+    measure_centres,
+    merge_centres,
+    nearest_return_centre,
+    split_blobs,
+)
+from localizer.models import CentreSensor, OdometryMotion
 
 
 @dataclass(frozen=True)
@@ -57,11 +71,7 @@ class FilterConfig:
     particles: int = 1000
     radius_m: float = 0.17  # robot radius (iRobot Create)
     meas_std_m: float = 0.02  # std of a measured centre, per axis (likelihood)
-    odom_dist_frac: float = 0.05  # std of driven distance per metre driven
-    odom_dist_floor_m: float = 0.002  # std of driven distance per period
-    odom_turn_frac: float = 0.05  # std of turn per radian turned
-    odom_turn_per_m: float = 0.05  # std of turn per metre driven, rad/m
-    odom_turn_floor_rad: float = 0.004  # std of turn per period
+    motion: OdometryMotion = field(default_factory=OdometryMotion)  # the odometry's noise
     resample_below: float = 0.5  # resample when N_eff < this fraction of N
     jitter_m: float = 0.001  # roughening after resampling, per axis
     jitter_rad: float = 0.005
@@ -70,7 +80,7 @@ class FilterConfig:
     width_margin_m: float = 0.06  # a blob wider than 2 r + this is not a robot
     fit_rms_m: float = 0.03  # a blob whose circle fit is worse than this is not a robot
     gate_m: float = 0.25  # a centre farther than this from a prediction is not that robot
-    lost_after: int = 3  # scans without a measurement before a free blob may re-seed
+    recovery: Recovery = field(default_factory=Recovery)  # which free blob a lost robot takes
     reseed_std_m: float = 0.02
     reseed_heading_std_rad: float = 0.2  # around the filter's own heading
     reseed_uniform_frac: float = 0.2  # of re-seeded particles with any heading
@@ -86,25 +96,6 @@ class FilterConfig:
 
 
 @dataclass(frozen=True)
-class ScanGeometry:
-    """Where the scanner is and how its beams are laid out (from the Scan message)."""
-
-    x: float
-    y: float
-    theta: float
-    angle_min: float
-    angle_step: float
-    range_max: float
-    beams: int = 361
-
-    @classmethod
-    def of(cls, scan: Any) -> ScanGeometry:
-        """The geometry a ``wire.Scan`` carries."""
-        return cls(scan.scanner_x, scan.scanner_y, scan.scanner_theta, scan.angle_min,
-                   scan.angle_step, scan.range_max, len(scan.ranges))
-
-
-@dataclass(frozen=True)
 class Estimate:
     """One robot's pose estimate after a scan."""
 
@@ -115,203 +106,7 @@ class Estimate:
     var_y: float
     var_theta: float
     measured: bool  # a blob was assigned to this robot in this scan
-    lost: bool  # no pose yet, or no measurement for ``lost_after`` scans
-
-
-# --- scan -> blobs -> centres ------------------------------------------------------
-
-
-def split_blobs(ranges: np.ndarray, geometry: ScanGeometry, jump_m: float) -> list[np.ndarray]:
-    """Beam indices of each blob: runs of returns (below the maximum range) whose
-    neighbouring returns are less than ``jump_m`` apart."""
-    starts, ends = blob_spans(ranges, geometry, jump_m)
-    return [np.arange(a, b) for a, b in zip(starts.tolist(), ends.tolist(), strict=True)]
-
-
-def blob_spans(ranges: np.ndarray, geometry: ScanGeometry, jump_m: float
-               ) -> tuple[np.ndarray, np.ndarray]:
-    """``split_blobs`` as each blob's first beam and the beam after its last."""
-    r = np.asarray(ranges, dtype=float)
-    hit = r < geometry.range_max - 1e-6
-    if not hit.any():
-        return np.empty(0, dtype=np.intp), np.empty(0, dtype=np.intp)
-    a = geometry.theta + geometry.angle_min + geometry.angle_step * np.arange(r.size)
-    px, py = r * np.cos(a), r * np.sin(a)
-    gap = np.hypot(np.diff(px), np.diff(py))
-    # a blob breaks after beam i if beam i or i+1 is a miss, or the two are far apart
-    breaks = ~hit[:-1] | ~hit[1:] | (gap > jump_m)
-    starts = np.flatnonzero(np.concatenate([[True], breaks]))
-    ends = np.append(starts[1:], r.size)
-    keep = hit[starts]
-    return starts[keep], ends[keep]
-
-
-def blob_points(ranges: np.ndarray, geometry: ScanGeometry, beams: np.ndarray) -> np.ndarray:
-    """World coordinates (k, 2) of the blob's returns."""
-    r = np.asarray(ranges, dtype=float)[beams]
-    a = geometry.theta + geometry.angle_min + geometry.angle_step * beams
-    return np.stack([geometry.x + r * np.cos(a), geometry.y + r * np.sin(a)], axis=1)
-
-
-def nearest_return_centre(
-    ranges: np.ndarray, geometry: ScanGeometry, beams: np.ndarray, radius: float
-) -> np.ndarray:
-    """Thesis 6.1.5: the blob's nearest return, pushed back by the robot radius along
-    its bearing."""
-    r = np.asarray(ranges, dtype=float)
-    j = int(beams[np.argmin(r[beams])])
-    a = geometry.theta + geometry.angle_min + geometry.angle_step * j
-    d = r[j] + radius
-    return np.array([geometry.x + d * math.cos(a), geometry.y + d * math.sin(a)])
-
-
-def fit_circle(points: np.ndarray, radius: float, start: np.ndarray,
-               iterations: int = 6) -> tuple[np.ndarray, float]:
-    """Least-squares centre of a circle of known ``radius`` through ``points``
-    (Gauss-Newton from ``start``); returns the centre and the RMS residual."""
-    cx, cy = float(start[0]), float(start[1])
-    px, py = points[:, 0], points[:, 1]
-    for _ in range(iterations):
-        dx, dy = px - cx, py - cy
-        dist = np.maximum(np.hypot(dx, dy), 1e-9)
-        res = dist - radius
-        jx, jy = -dx / dist, -dy / dist  # d(dist)/d(centre)
-        a, b, d = float(jx @ jx), float(jx @ jy), float(jy @ jy)
-        gx, gy = -float(jx @ res), -float(jy @ res)
-        det = a * d - b * b
-        if abs(det) < 1e-12:
-            break
-        sx, sy = (d * gx - b * gy) / det, (a * gy - b * gx) / det  # the 2x2 normal equations
-        cx, cy = cx + sx, cy + sy
-        if sx * sx + sy * sy < 1e-12:
-            break
-    res = np.hypot(px - cx, py - cy) - radius
-    return np.array([cx, cy]), float(np.sqrt(np.mean(res * res)))
-
-
-def blob_centre(ranges: np.ndarray, geometry: ScanGeometry, beams: np.ndarray,
-                config: FilterConfig) -> np.ndarray | None:
-    """The centre of the robot seen as this blob, or None if the blob is no robot."""
-    if beams.size < config.min_returns:
-        return None
-    pts = blob_points(ranges, geometry, beams)
-    width = float(np.hypot(*(pts[-1] - pts[0])))
-    if width > 2.0 * config.radius_m + config.width_margin_m:
-        return None
-    centre = nearest_return_centre(ranges, geometry, beams, config.radius_m)
-    if not config.refine or beams.size < 3:
-        return centre
-    # Start the fit on the blob's middle bearing: with range noise the nearest
-    # return may be any beam of the robot's front, up to several cm to the side.
-    mid = geometry.theta + geometry.angle_min + geometry.angle_step * 0.5 * (beams[0] + beams[-1])
-    reach = float(np.hypot(*(centre - (geometry.x, geometry.y))))
-    start = np.array([geometry.x + reach * math.cos(mid), geometry.y + reach * math.sin(mid)])
-    fitted, rms = fit_circle(pts, config.radius_m, start)
-    if rms > config.fit_rms_m:
-        return None
-    if np.hypot(*(fitted - start)) > config.radius_m:  # a fit gone astray: keep the thesis's
-        return centre
-    return fitted
-
-
-def measure_centres(ranges: np.ndarray, geometry: ScanGeometry,
-                    config: FilterConfig, iterations: int = 6) -> np.ndarray:
-    """Centres (m, 2) of every robot-shaped blob of a scan: ``blob_centre`` for all
-    blobs at once (blobs padded to one length and masked, one Gauss-Newton for all),
-    so thirty robots cost little more than three."""
-    starts, ends = blob_spans(ranges, geometry, config.jump_m)
-    big_enough = ends - starts >= config.min_returns
-    if not big_enough.any():
-        return np.empty((0, 2))
-    r_all = np.asarray(ranges, dtype=float)
-    first = starts[big_enough]
-    lengths = ends[big_enough] - first
-    width = int(lengths.max())
-    offs = np.minimum(np.arange(width)[None, :], lengths[:, None] - 1)
-    beams = first[:, None] + offs  # (B, K), padded with each blob's last beam
-    mask = (np.arange(width)[None, :] < lengths[:, None]).astype(float)
-    base = geometry.theta + geometry.angle_min
-    ang = base + geometry.angle_step * beams
-    rng = r_all[beams]
-    px = geometry.x + rng * np.cos(ang)
-    py = geometry.y + rng * np.sin(ang)
-    last = lengths - 1
-    rows = np.arange(first.size)
-    chord = np.hypot(px[rows, last] - px[:, 0], py[rows, last] - py[:, 0])
-    # the thesis's estimate: nearest return plus the radius along its bearing
-    near = np.argmin(np.where(mask > 0, rng, np.inf), axis=1)
-    reach = rng[rows, near] + config.radius_m
-    thesis = np.stack([geometry.x + reach * np.cos(ang[rows, near]),
-                       geometry.y + reach * np.sin(ang[rows, near])], axis=1)
-    ok = chord <= 2.0 * config.radius_m + config.width_margin_m
-    if not config.refine:
-        return thesis[ok]
-    mid = base + geometry.angle_step * 0.5 * (beams[:, 0] + beams[rows, last])
-    cx = geometry.x + reach * np.cos(mid)
-    cy = geometry.y + reach * np.sin(mid)
-    sx0, sy0 = cx.copy(), cy.copy()
-    for _ in range(iterations):
-        dx, dy = px - cx[:, None], py - cy[:, None]
-        dist = np.maximum(np.hypot(dx, dy), 1e-9)
-        res = (dist - config.radius_m) * mask
-        jx, jy = -dx / dist * mask, -dy / dist * mask
-        a, b, d = (jx * jx).sum(1), (jx * jy).sum(1), (jy * jy).sum(1)
-        gx, gy = -(jx * res).sum(1), -(jy * res).sum(1)
-        det = a * d - b * b
-        good = np.abs(det) > 1e-12
-        det = np.where(good, det, 1.0)
-        cx = cx + np.where(good, (d * gx - b * gy) / det, 0.0)
-        cy = cy + np.where(good, (a * gy - b * gx) / det, 0.0)
-    res = (np.hypot(px - cx[:, None], py - cy[:, None]) - config.radius_m) * mask
-    rms = np.sqrt((res * res).sum(1) / lengths)
-    ok &= rms <= config.fit_rms_m
-    astray = np.hypot(cx - sx0, cy - sy0) > config.radius_m  # keep the thesis's estimate
-    fitted = np.stack([np.where(astray, thesis[:, 0], cx), np.where(astray, thesis[:, 1], cy)],
-                      axis=1)
-    return fitted[ok]
-
-
-def merge_centres(per_scan: Sequence[np.ndarray], radius: float) -> np.ndarray:
-    """The centres (m, 2) several scanners measured in one tick, one per robot: a
-    centre less than a robot's radius from one the earlier scanners measured is the
-    same robot (two robots' centres are two radii apart at least), and the two are
-    averaged. One scan's centres are returned as they are."""
-    if len(per_scan) == 1:
-        return per_scan[0]
-    merged = np.empty((0, 2))
-    counts = np.empty(0)
-    for centres in per_scan:
-        centres = np.asarray(centres, dtype=float).reshape(-1, 2)
-        if merged.shape[0] and centres.shape[0]:
-            d = np.hypot(centres[:, None, 0] - merged[None, :, 0],
-                         centres[:, None, 1] - merged[None, :, 1])  # (this scan's, earlier)
-            j = d.argmin(axis=1)
-            same = d[np.arange(centres.shape[0]), j] < radius
-            sums = merged * counts[:, None]
-            np.add.at(sums, j[same], centres[same])
-            np.add.at(counts, j[same], 1.0)
-            merged = sums / counts[:, None]
-            centres = centres[~same]
-        merged = np.vstack([merged, centres])
-        counts = np.concatenate([counts, np.ones(centres.shape[0])])
-    return merged
-
-
-def assign(predicted: np.ndarray, candidates: np.ndarray, active: np.ndarray,
-           gate_m: float) -> np.ndarray:
-    """For each robot, the index of its measured centre, or -1: minimum total squared
-    distance over robots in ``active``, each pair gated at ``gate_m``."""
-    out = np.full(predicted.shape[0], -1, dtype=int)
-    rows = np.flatnonzero(active)
-    if rows.size == 0 or candidates.shape[0] == 0:
-        return out
-    d2 = ((predicted[rows, None, :] - candidates[None, :, :]) ** 2).sum(axis=2)
-    big = 1e6
-    cost = np.where(d2 <= gate_m * gate_m, d2, big)
-    r_idx, c_idx = linear_sum_assignment(cost)
-    ok = cost[r_idx, c_idx] < big
-    out[rows[r_idx[ok]]] = c_idx[ok]
-    return out
+    lost: bool  # no pose yet, or no measurement for ``Recovery.lost_after`` scans
 
 
 # --- the particle filter --------------------------------------------------------------
@@ -335,10 +130,14 @@ def systematic_resample(weights: np.ndarray, offsets: np.ndarray) -> np.ndarray:
 class Localizer:
     """One particle filter per robot, all in arrays of shape (robots, particles)."""
 
-    def __init__(self, robots: int, config: FilterConfig | None = None, seed: int = 1):
+    def __init__(self, robots: int, config: FilterConfig | None = None, seed: int = 1,
+                 motion: OdometryMotion | None = None, sensor: CentreSensor | None = None):
         if robots < 1:
             raise ValueError("need at least one robot")
-        self.config = config or FilterConfig()
+        self.config = c = config or FilterConfig()
+        self.motion = motion or c.motion
+        self.sensor = sensor or CentreSensor(c.meas_std_m)
+        self.rules = c.recovery
         self.robots = robots
         self.rng = np.random.default_rng(seed)
         n = self.config.particles
@@ -349,6 +148,9 @@ class Localizer:
         self.started = np.zeros(robots, dtype=bool)  # has had a pose at all
         self.missed = np.zeros(robots, dtype=int)  # scans since the last measurement
         self.drawn = False
+        # the last scans' centres and every robot's odometry distance, for still blobs
+        self._recent_centres: deque[np.ndarray] = deque(maxlen=self.rules.still_scans)
+        self._recent_motion: deque[np.ndarray] = deque(maxlen=self.rules.still_scans)
         self.resampled = 0  # resampling events so far (all robots)
         self.reseeded = 0  # recoveries so far
 
@@ -376,21 +178,9 @@ class Localizer:
 
     def predict(self, dist: np.ndarray, dtheta: np.ndarray) -> None:
         """Motion update from each robot's odometry of the last period (distance and
-        turn, shape (robots,)), with noise sampled per particle; the arc is
-        integrated at its mid heading."""
-        c, shape = self.config, self.x.shape
-        dist = np.asarray(dist, dtype=float)[:, None]
-        dtheta = np.asarray(dtheta, dtype=float)[:, None]
-        sd = c.odom_dist_frac * np.abs(dist) + c.odom_dist_floor_m
-        st = (c.odom_turn_frac * np.abs(dtheta) + c.odom_turn_per_m * np.abs(dist)
-              + c.odom_turn_floor_rad)
-        noise = self.rng.standard_normal((2, *shape))
-        d = dist + sd * noise[0]
-        dt = dtheta + st * noise[1]
-        mid = self.theta + 0.5 * dt
-        self.x += d * np.cos(mid)
-        self.y += d * np.sin(mid)
-        self.theta += dt  # left unwrapped: only its sine and cosine are ever used
+        turn, shape (robots,)): the motion model's sample for every particle."""
+        self.x, self.y, self.theta = self.motion.sample(self.x, self.y, self.theta, dist,
+                                                        dtheta, self.rng)
 
     # measurement ---------------------------------------------------------------
     def mean_positions(self) -> np.ndarray:
@@ -403,9 +193,7 @@ class Localizer:
         if rows.size == 0:
             return
         c = self.config
-        dx = self.x[rows] - z[rows, 0:1]
-        dy = self.y[rows] - z[rows, 1:2]
-        loglik = -(dx * dx + dy * dy) / (2.0 * c.meas_std_m**2)
+        loglik = self.sensor.log_likelihood(self.x[rows], self.y[rows], z[rows])
         logw = np.log(np.maximum(self.w[rows], 1e-300)) + loglik
         logw -= logw.max(axis=1, keepdims=True)
         w = np.exp(logw)
@@ -443,26 +231,14 @@ class Localizer:
         self.reseeded += 1
 
     def recover(self, centres: np.ndarray, used: np.ndarray) -> None:
-        """Re-seed lost robots from robot-shaped blobs no robot took."""
-        lost = np.flatnonzero(~self.started | (self.missed >= self.config.lost_after))
-        free = [j for j in range(centres.shape[0]) if not used[j]]
-        if lost.size == 0 or not free:
-            return
-        if not self.started.any():
-            # nobody has a pose yet: robots take the blobs in the order of the edge
-            order = sorted(free, key=lambda j: float(centres[j, 0]))
-            for robot, j in zip(lost.tolist(), order, strict=False):
-                self.reseed(robot, centres[j])
-            return
-        predicted = self.mean_positions()
-        for robot in lost.tolist():
-            if not free:
-                break
-            if self.started[robot]:
-                j = min(free, key=lambda j: float(np.hypot(*(centres[j] - predicted[robot]))))
-            else:
-                j = min(free, key=lambda j: float(centres[j, 0]))
-            free.remove(j)
+        """Re-seed lost robots on robot-shaped blobs no robot took (``recovery``)."""
+        known = len(self._recent_centres) == self.rules.still_scans  # enough to tell
+        still = still_blobs(centres, self._recent_centres, self.rules.still_m) \
+            if known else None
+        moved = (np.sum(self._recent_motion, axis=0) > self.rules.moved_m
+                 if self._recent_motion else np.zeros(self.robots, dtype=bool))
+        for robot, j in recovery(centres, used, self.mean_positions(), self.started,
+                                 self.missed, still, moved, self.rules):
             self.reseed(robot, centres[j])
 
     # output ----------------------------------------------------------------------
@@ -502,6 +278,8 @@ class Localizer:
         self.missed = np.where(has, 0, self.missed + 1)
         used = np.zeros(centres.shape[0], dtype=bool)
         used[match[has]] = True
+        self._recent_centres.append(centres)
+        self._recent_motion.append(np.abs(np.asarray(dist, dtype=float)))
         self.recover(centres, used)
         return self.estimates(has)
 
@@ -516,7 +294,7 @@ class Localizer:
         vy = (w * (self.y - my[:, None]) ** 2).sum(axis=1)
         # heading variance of a wrapped normal from the mean resultant length R
         vth = -2.0 * np.log(np.clip(np.hypot(s, c), 1e-12, 1.0))
-        lost = ~self.started | (self.missed >= self.config.lost_after)
+        lost = ~self.started | (self.missed >= self.rules.lost_after)
         rows = zip(mx.tolist(), my.tolist(), mth.tolist(), vx.tolist(), vy.tolist(),
                    vth.tolist(), measured.tolist(), lost.tolist(), strict=True)
         return [Estimate(*row) for row in rows]

@@ -8,36 +8,17 @@ import typing
 from functools import cache
 from typing import Any
 
-from wire import messages
+from wire.keys import parse_path
 
 INVALID_PREFIX = "invalid/"
 REJECTED_PREFIX = "rejected/"  # well formed but implausible (forged or broken): see writer
 ALIVE_PREFIX = "alive/agent/"
 
-_ROBOT_TOPICS: dict[tuple[str, str], type] = {
-    ("robot", "sense"): messages.Sense,
-    ("robot", "pose"): messages.Pose,
-    ("robot", "cmd"): messages.Cmd,
-    ("agent", "state"): messages.AgentState,
-}
-_FIXED_TOPICS: dict[str, type] = {
-    "world/tick": messages.Tick,
-    "world/truth": messages.Truth,
-    "world/info": messages.WorldInfo,
-    "fault": messages.Fault,
-    "laser/scan": messages.Scan,
-}
-
-
 def message_type(topic: str) -> type | None:
-    """The message class on ``topic`` (a key without the namespace), or None if unknown."""
-    fixed = _FIXED_TOPICS.get(topic)
-    if fixed is not None:
-        return fixed
-    parts = topic.split("/")
-    if len(parts) == 3 and parts[1].isdigit():
-        return _ROBOT_TOPICS.get((parts[0], parts[2]))
-    return None
+    """The message class on ``topic`` (a key without the namespace), or None if unknown
+    or a key that carries no message (the contract's table, ``wire.keys.TOPICS``)."""
+    found = parse_path(topic)
+    return found[0].message if found else None
 
 
 _JSON_TYPES: dict[Any, dict[str, Any]] = {

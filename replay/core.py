@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import msgpack
 
 from recorder import topics
-from wire.codec import encode
+from wire.codec import encode, from_record
 
 SKIPPED_PREFIXES = (topics.INVALID_PREFIX, topics.REJECTED_PREFIX, "alive/")
 
@@ -31,11 +31,11 @@ def replayable(topic: str) -> bool:
 def payload_of(topic: str, data: bytes) -> tuple[bytes, int | None]:
     """The msgpack payload of a recorded message's JSON, and its tick (None if it has
     none). A message of a known type is rebuilt as that type, so a field that is not
-    the type's own fails here (``TypeError``), not at its listener."""
+    the type's own fails here (``DecodeError``), not at its listener."""
     fields = json.loads(data)
     cls = topics.message_type(topic)
     if cls is not None:
-        payload = encode(cls(**fields))
+        payload = encode(from_record(cls, fields))
     else:  # a msgpack map on a topic of no known type, as it came
         payload = msgpack.packb(fields, use_bin_type=True)
     k = fields.get("k") if isinstance(fields, dict) else None

@@ -12,7 +12,7 @@ from typing import Any
 from report.load import LoadError, load_run
 from report.localization import localization_errors, summary_stats
 from report.measures import WORKLOAD_REL_BAND
-from report.series import error_series, time_grid
+from report.series import run_table
 from report.summary import (
     CONVERGE_SMOOTH_S,
     PHASE_BAND_RAD,
@@ -212,14 +212,14 @@ def make_report(
 
     run_dir = Path(run_dir)
     run = load_run(run_dir / "run.mcap")
-    series = error_series(run)
-    rev = revisit(run, time_grid(run))
+    table = run_table(run)  # the run as one table, for every measure and figure
+    rev = revisit(run, table.t)
     loc = localization_errors(run)
-    summary = compute_summary(run, series, phase_band, workload_band, rev, loc)
+    summary = compute_summary(table, phase_band, workload_band, rev, loc)
     write_summary(run_dir / "summary.json", summary)
-    errors_figure(series, run_dir / "errors.png", run)
+    errors_figure(table.errors, run_dir / "errors.png", run)
     map_figure(run, run_dir / "map.png")
-    boundaries_figure(run, run_dir / "boundaries.png")
+    boundaries_figure(table, run_dir / "boundaries.png")
     revisit_figure(rev, run_dir / "revisit.png")
     localization_figure(loc, run_dir / "localization.png", summary.get("localization"))
     extra: dict[str, Any] = {}

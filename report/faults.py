@@ -12,7 +12,7 @@ import numpy as np
 
 from report import measures as m
 from report.load import RunData
-from report.series import ErrorSeries, live_matrix, max_age_s
+from report.series import ErrorSeries, RunTable
 
 GONE = ("kill", "freeze")  # faults after which the agent should be dropped
 BACK = ("restart", "thaw", "join")  # and those after which it should be taken back
@@ -34,18 +34,14 @@ def segment_union(lo: np.ndarray, hi: np.ndarray, edge_lo: float, edge_hi: float
     return (edge_hi - edge_lo) - covered, max(0.0, total - covered)
 
 
-def coverage(run: RunData, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Gap and overlap (m) of the live agents' segments at each time of ``t``."""
-    ids = sorted(run.states)
+def coverage(table: RunTable) -> tuple[np.ndarray, np.ndarray]:
+    """Gap and overlap (m) of the live agents' segments at each tick of the run's table."""
+    t, run = table.t, table.run
     gap, overlap = np.full(t.size, np.nan), np.full(t.size, np.nan)
-    if not ids or run.edge is None:
+    if not table.ids or run.edge is None:
         return gap, overlap
     edge_lo, edge_hi = run.edge
-    age = max_age_s(run)
-    live = live_matrix(run, t, ids)
-    lo = np.vstack([m.hold(run.states[r].t, run.states[r].lo, t, age) for r in ids])
-    hi = np.vstack([m.hold(run.states[r].t, run.states[r].hi, t, age) for r in ids])
-    lo, hi = np.where(live, lo, np.nan), np.where(live, hi, np.nan)
+    lo, hi = table.live_segments()
     for k in range(t.size):
         gap[k], overlap[k] = segment_union(lo[:, k], hi[:, k], edge_lo, edge_hi)
     return gap, overlap

@@ -17,8 +17,7 @@ from matplotlib.patches import Patch  # noqa: E402
 
 from report.load import RunData  # noqa: E402
 from report.localization import LocErrors  # noqa: E402
-from report.measures import hold  # noqa: E402
-from report.series import NO_EDGE, ErrorSeries, edge_model, live_matrix, time_grid  # noqa: E402
+from report.series import NO_EDGE, ErrorSeries, RunTable, edge_model  # noqa: E402
 from report.summary import Revisit  # noqa: E402
 
 WATER = "#3a7dc9"
@@ -168,20 +167,17 @@ def _mark_faults(ax: plt.Axes, run: RunData) -> None:
                     fontsize=7, color="red")
 
 
-def boundaries_figure(run: RunData, path: str | Path) -> None:
+def boundaries_figure(table: RunTable, path: str | Path) -> None:
     """Each live robot's segment [s_i, s_i+1] against time, as it published it."""
+    run, t, ids = table.run, table.t, table.ids
     info = run.info
     fig, ax = plt.subplots(figsize=(10, 4.5))
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    ids = sorted(run.states)
-    t = time_grid(run)
-    live = live_matrix(run, t, ids)
     step = _thin(t.size)
+    live_lo, live_hi = table.live_segments()
     for j, robot in enumerate(ids):
-        st = run.states[robot]
         c = colours[j % len(colours)]
-        lo = np.where(live[j], hold(st.t, st.lo, t), np.nan)[step]
-        hi = np.where(live[j], hold(st.t, st.hi, t), np.nan)[step]
+        lo, hi = live_lo[j][step], live_hi[j][step]
         ax.fill_between(t[step], lo, hi, color=c, alpha=0.25, lw=0,
                         label=f"robot {robot}'s segment")
         ax.plot(t[step], lo, color=c, lw=0.9)

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import re
 from collections import defaultdict
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -15,10 +17,19 @@ from mcap.reader import make_reader
 from mcap.records import Channel, Footer, Message
 from mcap.stream_reader import StreamReader
 
+from wire.codec import DecodeError, from_record
+from wire.keys import parse_path
+from wire.messages import AgentState, Fault, Pose, Sense, Tick, WorldInfo
+from wire.messages import Truth as WireTruth
+
 STATE_FIELDS = ("t", "lo", "hi", "phase", "phase_des", "workload", "depth_avg", "direction",
                 "lower", "upper")
 TRUTH_FIELDS = ("t", "x", "y", "theta")
 ODOM_FIELDS = ("t", "odom_dist_m", "odom_dtheta")
+
+
+_LEGACY_TRUTH = re.compile(r"^robot/[0-9]+/truth$")
+_READ = (Tick, Fault, WireTruth, AgentState, Pose, Sense, WorldInfo)  # what the report reads
 
 
 class LoadError(Exception):
@@ -114,11 +125,6 @@ def _last_of_each_time(cols: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     return {name: arr[keep] for name, arr in cols.items()}
 
 
-def _robot(topic: str) -> int | None:
-    parts = topic.split("/")
-    return int(parts[1]) if len(parts) >= 3 and parts[1].isdigit() else None
-
-
 def _messages(stream: BinaryIO, cut: list[str]) -> Iterator[tuple[Channel, Message]]:
     """Every message of the MCAP ``stream`` with its channel, in file order. A file
     without its summary (the recorder was killed: no footer, perhaps half a chunk at the
@@ -189,46 +195,50 @@ def load_run(path: str | Path) -> RunData:
                     rest = topic[len("rejected/"):]
                     rejected[rest] = rejected.get(rest, 0) + 1
                     continue
-                if topic == "world/tick":
-                    msg = json.loads(message.data)
-                    # the world's own wall clock when it has one, else the recorder's
-                    ticks.append((msg["t"], msg.get("wall_ns") or message.log_time))
-                    world_counts = (msg.get("dropped", 0), msg.get("rejected", 0))
-                    live.append(sorted(int(r) for r in msg.get("live", [])))
-                elif topic == "fault":
-                    msg = json.loads(message.data)
-                    faults.append({**msg, "log_ns": message.log_time})
-                elif topic == "world/truth":  # every robot's, one message per tick
-                    msg = json.loads(message.data)
-                    t = msg["t"]
-                    for r, x, y, th in zip(msg["robots"], msg["x"], msg["y"], msg["theta"],
-                                           strict=True):
-                        truth[int(r)].append((t, x, y, th))
-                elif topic.endswith("/truth"):  # recordings made before 2026-11-23: per robot
-                    msg = json.loads(message.data)
-                    truth[int(msg["robot"])].append((msg["t"], msg["x"], msg["y"], msg["theta"]))
-                elif topic.endswith("/state") and topic.startswith("agent/"):
-                    msg = json.loads(message.data)
-                    states[int(msg["robot"])].append(tuple(msg[f] for f in STATE_FIELDS))
-                    agent_counts[int(msg["robot"])] = (msg.get("dropped", 0),
-                                                      msg.get("rejected", 0))
-                    agents_edge = (msg["edge_lo"], msg["edge_hi"])
-                elif topic.endswith("/pose") and topic.startswith("robot/"):
-                    msg = json.loads(message.data)
-                    poses[int(msg["robot"])].append(tuple(msg[f] for f in TRUTH_FIELDS))
-                elif topic.endswith("/sense") and topic.startswith("robot/"):
-                    msg = json.loads(message.data)
-                    odometry[int(msg["robot"])].append(tuple(msg[f] for f in ODOM_FIELDS))
-                    if msg.get("pose"):  # the pose the robot was given came with its sensing
-                        poses[int(msg["robot"])].append((msg["t"], *msg["pose"]))
-                elif topic == "world/info":
-                    info = json.loads(message.data)
-                elif topic.startswith("alive/agent/"):
-                    robot = _robot(topic)
+                found = parse_path(topic)
+                if found is None:
+                    if _LEGACY_TRUTH.match(topic):  # recordings before 2026-11-23: per robot
+                        old = json.loads(message.data)
+                        truth[int(old["robot"])].append(
+                            (old["t"], old["x"], old["y"], old["theta"]))
+                    continue
+                kind, robot = found
+                if kind.name == "alive":  # a liveliness token's news, no message type
                     if robot is not None:
                         alive[robot].append(
-                            (message.log_time, bool(json.loads(message.data)["alive"]))
-                        )
+                            (message.log_time, bool(json.loads(message.data)["alive"])))
+                    continue
+                if kind.message not in _READ:
+                    continue  # commands, scans: nothing the report measures
+                try:
+                    msg = from_record(kind.message, json.loads(message.data))
+                except (DecodeError, ValueError):  # a record of another contract
+                    invalid += 1
+                    continue
+                if isinstance(msg, Tick):
+                    # the world's own wall clock when it has one, else the recorder's
+                    ticks.append((msg.t, msg.wall_ns or message.log_time))
+                    world_counts = (msg.dropped, msg.rejected)
+                    live.append(sorted(msg.live))
+                elif isinstance(msg, Fault):
+                    faults.append({**dataclasses.asdict(msg), "log_ns": message.log_time})
+                elif isinstance(msg, WireTruth):  # every robot's, one message per tick
+                    for r, x, y, th in zip(msg.robots, msg.x, msg.y, msg.theta, strict=True):
+                        truth[r].append((msg.t, x, y, th))
+                elif isinstance(msg, AgentState):
+                    states[msg.robot].append((msg.t, msg.lo, msg.hi, msg.phase, msg.phase_des,
+                                              msg.workload, msg.depth_avg, msg.direction,
+                                              msg.lower, msg.upper))
+                    agent_counts[msg.robot] = (msg.dropped, msg.rejected)
+                    agents_edge = (msg.edge_lo, msg.edge_hi)
+                elif isinstance(msg, Pose):
+                    poses[msg.robot].append((msg.t, msg.x, msg.y, msg.theta))
+                elif isinstance(msg, Sense):
+                    odometry[msg.robot].append((msg.t, msg.odom_dist_m, msg.odom_dtheta))
+                    if msg.pose:  # the pose the robot was given came with its sensing
+                        poses[msg.robot].append((msg.t, *msg.pose))
+                elif isinstance(msg, WorldInfo):
+                    info = dataclasses.asdict(msg)
     except LoadError:
         raise
     except Exception as exc:  # the mcap reader raises many types on a damaged file

@@ -60,7 +60,9 @@ def _error_at(track: Truth, t: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.n
 
 def localization_errors(run: RunData) -> LocErrors:
     """Errors of the given poses and of odometry alone against truth, per robot, on the
-    truth's times (NaN where a robot had no pose at that time)."""
+    truth's times (NaN where a robot had no pose at that time, and, where the world
+    recorded its live agents, where the robot's agent was not in the team: a robot
+    parked until it joins steers by no pose, whatever the localizer says of it)."""
     out = LocErrors()
     for rid, tr in sorted(run.truth.items()):
         if tr.t.size == 0:
@@ -68,7 +70,8 @@ def localization_errors(run: RunData) -> LocErrors:
         out.t[rid] = tr.t
         pose = run.poses.get(rid)
         if pose is not None and pose.t.size:
-            out.pf[rid] = _error_at(pose, tr.t, tr.x, tr.y)
+            out.pf[rid] = np.where(_in_team(run, rid, tr.t), _error_at(pose, tr.t, tr.x, tr.y),
+                                   math.nan)
         odom = run.odometry.get(rid)
         if odom is not None and odom.shape[1]:
             ox, oy = dead_reckon(float(tr.x[0]), float(tr.y[0]), float(tr.theta[0]),
@@ -76,6 +79,16 @@ def localization_errors(run: RunData) -> LocErrors:
             track = Truth(odom[0], ox, oy, np.zeros_like(ox))
             out.odometry[rid] = _error_at(track, tr.t, tr.x, tr.y)
     return out
+
+
+def _in_team(run: RunData, rid: int, t: np.ndarray) -> np.ndarray:
+    """Whether robot ``rid``'s agent was live at each time of ``t``, by the world's
+    ticks (everywhere True for a recording without them)."""
+    if run.tick_t.size == 0 or len(run.tick_live) != run.tick_t.size:
+        return np.ones(t.size, dtype=bool)
+    live = np.array([rid in ids for ids in run.tick_live])
+    idx = np.clip(np.searchsorted(run.tick_t, t - 1e-9), 0, run.tick_t.size - 1)
+    return live[idx]
 
 
 def summary_stats(errors: np.ndarray) -> tuple[float, float]:

@@ -1,9 +1,11 @@
-"""Error time series of a recorded run: phase and workload errors per neighbour pair
-on one time grid (the ticks). Pure: arrays in, arrays out."""
+"""A recorded run as one table on one time grid (the ticks), and its error series:
+phase and workload errors per neighbour pair. Pure: arrays in, arrays out."""
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -65,9 +67,45 @@ def live_matrix(run: RunData, t: np.ndarray, ids: list[int]) -> np.ndarray:
     return live
 
 
-def error_series(run: RunData) -> ErrorSeries:
-    """Errors per neighbour pair on the ticks: each agent's published state and each
-    robot's track (truth, else (hardware) the agents' poses) held at every tick."""
+@dataclass(frozen=True)
+class RunTable:
+    """A recorded run as one table, built once (``run_table``) for every measure and
+    figure: the time grid (the ticks), the agents that published (``ids``, in id
+    order: neighbours are consecutive), each one's published state and its robot's
+    track held at every tick (arrays of shape (robots, ticks)), who was in the team
+    (``live``), and the edge as the measures see it."""
+
+    run: RunData
+    t: np.ndarray
+    ids: list[int]
+    x: np.ndarray
+    y: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    direction: np.ndarray
+    phase: np.ndarray
+    workload: np.ndarray
+    path: np.ndarray  # the path-length phase along each track as recorded, held
+    live: np.ndarray
+    edge: m.EdgeModel | None
+
+    @cached_property
+    def errors(self) -> ErrorSeries:
+        """Errors per neighbour pair on the ticks (``measures.team_errors``)."""
+        return m.team_errors(
+            self.t, self.x, self.y, self.lo, self.hi, self.direction, self.phase,
+            self.workload, self.edge or NO_EDGE, live=self.live, ids=self.ids,
+            phase_path=self.path,
+        )
+
+    def live_segments(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every live agent's published segment at each tick, NaN while out of the team."""
+        return np.where(self.live, self.lo, np.nan), np.where(self.live, self.hi, np.nan)
+
+
+def run_table(run: RunData) -> RunTable:
+    """The run's one table: each agent's state and each robot's track (truth, else
+    (hardware) the agents' poses) held at every tick, for at most ``max_age_s``."""
     t = time_grid(run)
     age = max_age_s(run)
     tracks = run.positions
@@ -91,13 +129,14 @@ def error_series(run: RunData) -> ErrorSeries:
         else:
             rows["x"].append(m.hold(tr.t, tr.x, t, age))
             rows["y"].append(m.hold(tr.t, tr.y, t, age))
-            # the path-length phase along the track as recorded, then held at the ticks
             dir_on_track = m.hold(st.t, st.direction, tr.t, age)
             along_path = m.path_length_phase(tr.x, tr.y, dir_on_track)
             rows["path"].append(m.hold(tr.t, along_path, t, age))
     a = {name: np.array(r).reshape(len(ids), t.size) for name, r in rows.items()}
-    return m.team_errors(
-        t, a["x"], a["y"], a["lo"], a["hi"], a["direction"], a["phase"], a["workload"],
-        edge_model(run) or NO_EDGE, live=live_matrix(run, t, ids), ids=ids,
-        phase_path=a["path"],
-    )
+    return RunTable(run, t, ids, a["x"], a["y"], a["lo"], a["hi"], a["direction"], a["phase"],
+                    a["workload"], a["path"], live_matrix(run, t, ids), edge_model(run))
+
+
+def error_series(run: RunData) -> ErrorSeries:
+    """Errors per neighbour pair on the ticks (``run_table(run).errors``)."""
+    return run_table(run).errors

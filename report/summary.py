@@ -22,7 +22,7 @@ from report.measures import (
 )
 from report.measures import POINT_STEP_M as POINT_STEP_M  # re-exported: the report's grids
 from report.measures import VISIT_MERGE_S as VISIT_MERGE_S
-from report.series import ErrorSeries, edge_model, error_series, time_grid
+from report.series import ErrorSeries, RunTable, edge_model, run_table
 
 KEYS = (
     "map",
@@ -194,24 +194,25 @@ def _integral(t: np.ndarray, values: np.ndarray) -> float:
 
 
 def compute_summary(
-    run: RunData,
-    series: ErrorSeries | None = None,
+    run: RunData | RunTable,
     phase_band: float = PHASE_BAND_RAD,
     workload_band: float = WORKLOAD_BAND_M2,
     rev: Revisit | None = None,
     loc: LocErrors | None = None,
 ) -> dict[str, Any]:
-    """Every measure of the run, keyed as in ``KEYS`` (NaN where it cannot be computed).
-    The team's measures are those of ``measures.team_measures``, by the same functions.
-    ``rev``: the run's revisit times, if already computed."""
-    s = error_series(run) if series is None else series
+    """Every measure of the run (or of its table, ``run_table``, if already built),
+    keyed as in ``KEYS`` (NaN where it cannot be computed). The team's measures are
+    those of ``measures.team_measures``, by the same functions. ``rev`` and ``loc``:
+    the run's revisit times and localisation errors, if already computed."""
+    table = run if isinstance(run, RunTable) else run_table(run)
+    run, s = table.run, table.errors
     loc_mean, loc_p95 = summary_stats((loc or localization_errors(run)).pooled("pf"))
     info = run.info
-    edge = edge_model(run)
+    edge = table.edge
     errors = m.error_measures(s, edge.total_workload if edge else math.nan, STEADY_LAST,
                               phase_band, workload_band, CONVERGE_SMOOTH_S)
-    rev = rev or revisit(run, time_grid(run))
-    gap, _ = coverage(run, s.t)
+    rev = rev or revisit(run, table.t)
+    gap, _ = coverage(table)
     out: dict[str, Any] = {
         "map": info.get("map"),
         "start": info.get("start"),

@@ -36,6 +36,7 @@ from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
 from scene import build
+from wire.codec import from_record
 from wire.messages import AgentState, Scan, Truth, WorldInfo
 
 PLOT_SCHEMAS = {
@@ -108,7 +109,7 @@ class Collected:
         if topic == "laser/scan":
             msg = json.loads(data)
             msg["ranges"] = array("d", msg["ranges"])  # a third of a list's memory
-            scan = Scan(**msg)
+            scan = from_record(Scan, msg)
             self.scans[scan.k][scan.scanner] = scan
             self._seen(scan.k, scan.t, log_ns)
             return
@@ -117,13 +118,13 @@ class Collected:
             msg = json.loads(data)
             self.ticks[msg["k"]] = (msg["t"], msg.get("wall_ns") or log_ns)
         elif topic == "world/truth":
-            truth = Truth(**json.loads(data))
+            truth = from_record(Truth, json.loads(data))
             self.truth[truth.k] = truth
             self._seen(truth.k, truth.t, log_ns)
         elif topic == "world/info":
-            self.info = WorldInfo(**json.loads(data))
+            self.info = from_record(WorldInfo, json.loads(data))
         elif len(parts) == 3 and parts[0] == "agent" and parts[2] == "state":
-            state = AgentState(**json.loads(data))
+            state = from_record(AgentState, json.loads(data))
             self.states[state.k][state.robot] = state  # a state sent again replaces it
             self._seen(state.k, state.t, log_ns)
         elif len(parts) == 3 and parts[0] == "robot" and parts[2] == "pose":

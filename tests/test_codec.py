@@ -8,6 +8,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from wire import AgentState, Cmd, DecodeError, Keys, Sense, Truth, WorldInfo, decode, encode
+from wire.codec import from_record
+from wire.keys import TOPICS
 
 finite = st.floats(allow_nan=False, allow_infinity=False, min_value=-1e6, max_value=1e6)
 
@@ -159,3 +161,38 @@ def test_keys_namespace_and_robot_of():
     assert keys.relative(keys.sense(0)) == "robot/0/sense"
     with pytest.raises(ValueError):
         Keys("bad ns*")
+
+
+@given(st.sampled_from(sorted(TOPICS)), st.integers(0, 10_000))
+def test_every_key_parses_back_to_its_topic_and_robot(name, robot):
+    keys = Keys("btrack/run-1")
+    topic = TOPICS[name]
+    key = keys.key(name, robot if topic.per_robot else None)
+    assert keys.parse(key) == (topic, robot if topic.per_robot else None)
+    assert Keys("other").parse(key) is None
+    if topic.per_robot:  # the pattern of every robot's key, for access control
+        diff = [(a, b) for a, b in zip(key.split("/"), keys.pattern(name).split("/"),
+                                       strict=True) if a != b]
+        assert diff == [(str(robot), "*")]
+        with pytest.raises(ValueError, match="needs a robot"):
+            keys.key(name)
+    else:
+        assert keys.pattern(name) == key
+
+
+def test_the_recorders_table_is_the_contracts():
+    from recorder.topics import message_type
+
+    for topic in TOPICS.values():
+        path = topic.at(7) if topic.per_robot else topic.at()
+        assert message_type(path) is topic.message
+    assert message_type("robot/7/truth") is None and message_type("robot/x/sense") is None
+
+
+def test_a_record_builds_its_message_and_one_of_another_contract_is_refused():
+    msg = state()
+    raw = {n: getattr(msg, n) for n in msg.__dataclass_fields__}
+    assert from_record(AgentState, raw) == msg
+    renamed = {("lo_m" if n == "lo" else n): v for n, v in raw.items()}
+    with pytest.raises(DecodeError, match="missing \\['lo'\\], unknown \\['lo_m'\\]"):
+        from_record(AgentState, renamed)

@@ -168,6 +168,18 @@ def test_certs_for_the_fleet_chain_to_its_ca(tmp_path: Path) -> None:
                            "-in", str(tmp_path / "base.lab/etc/btrack/tls/base.pem")],
                           capture_output=True, text=True).stdout
     assert "CN = btrack-base" in subj and "base.lab" in subj and "192.168.50.1" in subj
+    # revoking robot 1: its generation raised, its certificate alone issued again by the CA
+    fleet = tmp_path / "fleet.toml"
+    fleet.write_text(EXAMPLE.read_text().replace('id = 1\n', 'id = 1\ngeneration = 2\n', 1))
+    before = (base / "world.pem").read_bytes()
+    res = btrack("deploy", "certs", str(fleet), "--out", str(tmp_path), "--robot", "1")
+    assert res.returncode == 0 and "generation 2" in res.stdout, res.stderr
+    subj = subprocess.run(["openssl", "x509", "-noout", "-subject", "-in",
+                           str(tls / "robot-1.pem")], capture_output=True, text=True).stdout
+    assert "CN = btrack-robot-1-g2" in subj
+    ok = subprocess.run(["openssl", "verify", "-CAfile", str(tls / "ca.pem"),
+                         str(tls / "robot-1.pem")], capture_output=True, text=True)
+    assert ok.returncode == 0 and (base / "world.pem").read_bytes() == before
 
 
 BAD = [
@@ -192,6 +204,8 @@ BAD = [
      '[[robots]]\nid = 0\nhost = "r"\n', ':6: base.localizer: world = "hardware" needs the'),
     ('namespace = "a"\n[base]\nhost = "b"\n[[robots]]\nid = 0\nhost = "r"\nport = "ttyUSB0"\n',
      ":7: robots[0].port: must be an absolute path"),
+    ('namespace = "a"\n[base]\nhost = "b"\n[[robots]]\nid = 0\nhost = "r"\ngeneration = 0\n',
+     ":7: robots[0].generation: must be >= 1"),
 ]
 
 

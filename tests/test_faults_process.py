@@ -11,7 +11,7 @@ import pytest
 
 from report.faults import coverage, coverage_ok
 from report.load import load_run
-from report.series import time_grid
+from report.series import run_table, time_grid
 from tests.procutil import pid_alive, run_sim
 
 CYCLE_S = 200.0  # the default common patrol cycle
@@ -61,7 +61,7 @@ def test_live_segments_cover_the_edge_within_a_second_of_detection(kill_and_free
     assert [(f["kind"], f["agent"]) for f in faults] == [("kill", 2), ("freeze", 1),
                                                           ("thaw", 1)]
     t = time_grid(run)
-    ok = coverage_ok(*coverage(run, t))
+    ok = coverage_ok(*coverage(run_table(run)))
     for j, f in enumerate(faults):
         assert f["detected_s"] is not None and f["detected_s"] >= f["at_s"], f
         until = faults[j + 1]["at_s"] if j + 1 < len(faults) else t[-1]
@@ -106,7 +106,7 @@ def test_chaos_with_a_fourth_robot_joining_keeps_the_edge_covered(tmp_path):
     # the coverage invariant at every recorded tick, but around each change of
     # membership (half a second before to a second after)
     t = time_grid(run)
-    ok = coverage_ok(*coverage(run, t))
+    ok = coverage_ok(*coverage(run_table(run)))
     changes = membership_changes(run)
     settling = np.zeros(t.size, dtype=bool)
     for c in changes:

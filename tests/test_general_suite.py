@@ -56,7 +56,7 @@ def test_the_belief_goal_allows_a_fifth_or_two_thousandths():
 @pytest.mark.parametrize("robots, duration, localization", [
     (5, 40, "truth"),
     # a 21.4 m edge: three scanners, every scan and the localizer in the loop
-    (3, 20, "pf"),
+    (3, 10, "pf"),
 ])
 def test_in_process_engine_is_the_bus_run_bit_for_bit(tmp_path, robots, duration,
                                                       localization):

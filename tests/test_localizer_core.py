@@ -209,3 +209,57 @@ def test_a_row_of_scanners_tracks_a_team_one_scanner_cannot_see() -> None:
         est = alone.step(scan_of(laser, poses[k, :, :2].tolist()), geometry, odom[k, :, 0],
                          odom[k, :, 1])
     assert sum(e.lost for e in est) >= 2  # the ends were never seen
+
+
+def _run_team(loc: Localizer, laser: Laser, poses: np.ndarray, odom: np.ndarray
+              ) -> np.ndarray:
+    """Errors (T, R) of the filter's estimates over a trajectory (see ``track``)."""
+    est = track(loc, laser, poses, odom)
+    return np.array([np.hypot(*(e[:, :2] - p[:, :2]).T) for e, p in zip(est, poses,
+                                                                          strict=True)])
+
+
+def test_a_robot_parked_in_view_is_not_taken_for_a_driving_one() -> None:
+    """btrack sim --robots 3 --fault join:3@200 with pf: robot 1 starts hidden behind
+    the joiner parked in front of it, so at the start robot 1's filter takes the
+    joiner's blob. Once robot 1 drives, a blob that stands still is not it: it is
+    found where it comes out, and the joiner's filter gets the parked blob."""
+    steps = 120
+    poses = np.zeros((steps, 4, 3))
+    odom = np.zeros((steps, 4, 2))
+    poses[:, 3] = (3.0, -1.5, 0.5 * math.pi)  # parked, never driven
+    for r, x in ((0, 0.05), (2, 4.05)):
+        for k in range(steps):
+            poses[k, r] = (x, -1.0 + 0.02 * k, 0.5 * math.pi)
+            odom[k, r] = (0.02 if k else 0.0, 0.0)
+    heading = 0.75 * math.pi  # robot 1 waits 30 scans, then drives off up and left
+    for k in range(steps):
+        d = 0.03 * max(0, k - 30)
+        poses[k, 1] = (2.8 + d * math.cos(heading), -1.0 + d * math.sin(heading),
+                       heading if k > 30 else heading)
+        odom[k, 1] = (0.03 if k > 30 else 0.0, 0.0)
+    loc = Localizer(4, seed=8)
+    errors = _run_team(loc, Laser(SCANNER, seed=8), poses, odom)
+    assert errors[5, 1] > 0.3  # hidden at the start: it took the joiner's blob
+    assert (errors[-30:, :] < 0.05).all()  # each robot found, the joiner on its spot
+    assert (errors[:, 0] < 0.05).all() and (errors[:, 2] < 0.05).all()
+
+
+def test_an_occluded_robot_does_not_jump_to_a_blob_across_the_scene() -> None:
+    """Robot 0 drives in front of robot 1 and stops there, hiding it; robot 2 drives
+    with odometry that says nothing, so its filter keeps falling behind and its blob
+    is free again and again. Robot 1 must not re-seed there: the blob is metres from
+    its prediction, and robot 2's filter is the nearer claimant."""
+    steps = 60
+    poses = np.zeros((steps, 3, 3))
+    odom = np.zeros((steps, 3, 2))
+    for k in range(steps):
+        poses[k, 0] = (1.0 + 0.1 * min(k, 20), -1.0, 0.0)  # then stands in the way
+        odom[k, 0] = (0.1 if 0 < k <= 20 else 0.0, 0.0)
+        poses[k, 1] = (3.0, 1.0, 0.5 * math.pi)
+        poses[k, 2] = (5.5, 0.04 * k, 0.5 * math.pi)  # its odometry is silent
+    loc = Localizer(3, seed=9)
+    errors = _run_team(loc, Laser(SCANNER, seed=9), poses, odom)
+    assert (errors[:, 0] < 0.05).all()
+    assert errors[:, 1].max() < 0.1  # hidden, it stays where it was last seen
+    assert errors[-1, 2] < 0.3  # robot 2's filter caught up by re-seeding

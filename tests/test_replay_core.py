@@ -10,7 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from replay.core import Item, Pacer, due_s, payload_of, replayable
-from wire import Pose, Scan, Tick, decode, encode
+from wire import DecodeError, Pose, Scan, Tick, decode, encode
 
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
 
@@ -35,7 +35,7 @@ def test_scans_ticks_and_unknown_maps_replay_field_for_field():
     assert payload_of("world/tick", _as_recorded(tick)) == (encode(tick), 0)
     payload, k = payload_of("something/else", b'{"a":1,"k":true}')
     assert k is None and payload == b"\x82\xa1a\x01\xa1k\xc3"
-    with pytest.raises(TypeError):  # a field the type does not have
+    with pytest.raises(DecodeError):  # a field the type does not have
         payload_of("world/tick", b'{"t":0.0,"k":0,"live":[],"extra":1}')
 
 

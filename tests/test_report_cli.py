@@ -15,7 +15,7 @@ from recorder.writer import Recording, RunWriter
 from report.faults import coverage
 from report.load import load_run
 from report.measures import speedup
-from report.series import time_grid
+from report.series import run_table
 from report.summary import KEYS, compute_summary
 from report.synthetic import write_synthetic_run
 from wire.codec import encode
@@ -99,7 +99,7 @@ def test_a_hardware_recording_is_measured_from_the_agents_poses(tmp_path: Path) 
     assert ours["workload_sse_agents_m2"] == pytest.approx(0.0, abs=1e-9)
     # the edge comes from the agents' states: the segments' coverage is measured too
     hw_run = load_run(hw / "run.mcap")
-    gap, overlap = coverage(hw_run, time_grid(hw_run))
+    gap, overlap = coverage(run_table(hw_run))
     assert gap.size and np.all(gap == 0.0) and np.all(overlap == 0.0)
     assert "No ground truth in this recording" in (hw / "report.md").read_text()
     assert "No ground truth" not in (sim / "report.md").read_text()

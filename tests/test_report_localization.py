@@ -44,6 +44,20 @@ def test_errors_against_truth_on_the_ticks() -> None:
     assert all(math.isnan(v) for v in summary_stats(np.empty(0)))
 
 
+def test_a_robot_outside_the_team_steers_by_no_pose() -> None:
+    """A joiner parked until tick 3: whatever the localizer said of it before, no
+    agent used it."""
+    t = np.arange(5) * 0.1
+    truth = Truth(t, np.zeros(5), np.zeros(5), np.zeros(5))
+    poses = Truth(t, np.full(5, 3.0), np.zeros(5), np.zeros(5))  # 3 m off throughout
+    run = RunData(info={}, tick_t=t, tick_log_ns=np.zeros(5, dtype=np.int64),
+                  truth={0: truth, 1: truth}, poses={0: poses, 1: poses},
+                  tick_live=[[0], [0], [0], [0, 1], [0, 1]])
+    loc = localization_errors(run)
+    assert np.allclose(loc.pf[0], 3.0)
+    assert np.isnan(loc.pf[1][:3]).all() and np.allclose(loc.pf[1][3:], 3.0)
+
+
 def test_world_refuses_a_bad_kidnap() -> None:
     run = subprocess.run([sys.executable, "-m", "btrack", "world", "--kidnap", "1@x:1,0",
                           "--no-multicast"], capture_output=True, text=True, timeout=30)

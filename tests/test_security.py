@@ -659,3 +659,84 @@ def test_a_robot_can_put_hear_query_or_answer_nothing_of_any_other_key_class(bus
     finally:
         stop(proc)
         w.close()
+
+
+def test_a_revoked_robot_is_refused_at_once_including_on_its_open_link(tmp_path: Path
+                                                                       ) -> None:
+    """Issue 19, item 8: a stolen robot key worked until it expired, and a re-issued
+    certificate had the same name, so the old one kept working. Revoking robot 1: its
+    generation raised to 2 in the fleet file, its certificate issued again under the
+    new name (`btrack deploy certs --robot 1`), the router's configuration rendered
+    again and the router restarted (Zenoh reads its access control only at start). The
+    stolen generation-1 certificate's open link ends with the restart; it reconnects
+    (its CA is still the fleet's) but nothing it puts reaches anyone, while the new
+    certificate's puts do."""
+    import dataclasses
+
+    from deploy.certs import reissue_robot_cert
+    from wire import decode
+
+    b = Bus(tmp_path, robots=2)
+    try:
+        session, _ = open_observer(b)
+        with session:
+            tls = tmp_path / "tls"
+            stolen = b.robot_config(1)
+            for suffix in ("pem", "key"):  # the thief's copy of generation 1
+                (tls / f"stolen.{suffix}").write_bytes((tls / f"robot-1.{suffix}").read_bytes())
+            stolen["transport"]["link"]["tls"].update(
+                connect_certificate=str(tls / "stolen.pem"),
+                connect_private_key=str(tls / "stolen.key"))
+            key = Keys(b.ns).cmd(1)
+            heard: list[tuple[float, float]] = []  # (arrival, the command's t: who sent it)
+            watch = session.declare_subscriber(key, lambda s: heard.append(
+                (time.time(), decode(Cmd, s.payload.to_bytes()).t)))
+            thief_t, new_t = 0.0, 1.0
+
+            def count(who: float, since: float) -> int:
+                return sum(1 for at, t in list(heard) if t == who and at > since)
+
+            with zenoh.open(zenoh.Config.from_json5(json.dumps(stolen))) as thief:
+                deadline = time.monotonic() + 20
+                while count(thief_t, 0.0) < 10 and time.monotonic() < deadline:
+                    thief.put(key, encode(Cmd(thief_t, 0, 1, 0.0, 0.0)))
+                    time.sleep(0.02)
+                assert count(thief_t, 0.0) >= 10, "generation 1 worked before the revocation"
+                robots = tuple(dataclasses.replace(r, generation=2) if r.id == 1 else r
+                               for r in b.fleet.robots)
+                fleet = dataclasses.replace(b.fleet, robots=robots)
+                reissue_robot_cert(fleet, tls, 1, flat=True)
+                conf = router_config(fleet, "127.0.0.1")
+                add_test_observer(conf, tls)
+                names = [n for subject in conf["access_control"]["subjects"]
+                         for n in subject["cert_common_names"]]
+                assert Fleet.common_name(1) not in names and Fleet.common_name(1, 2) in names
+                stop(b.proc)
+                restarted = time.time()
+                b.proc = start(["router", "--zenoh-config", str(b.write("router2", conf))],
+                               log=tmp_path / "router2.log")
+                opened: list[zenoh.Session] = []
+
+                def new_certificate_joins() -> bool:
+                    try:
+                        opened.append(zenoh.open(zenoh.Config.from_json5(
+                            json.dumps(b.robot_config(1)))))
+                    except zenoh.ZError:
+                        return False
+                    return True
+
+                wait_for(new_certificate_joins, 30, "the restarted router")
+                with opened[0] as new:
+                    deadline = time.monotonic() + 30
+                    while count(new_t, restarted) < 10 and time.monotonic() < deadline:
+                        new.put(key, encode(Cmd(new_t, 1, 1, 0.0, 0.0)))
+                        thief.put(key, encode(Cmd(thief_t, 0, 1, 0.0, 0.0)))  # all along
+                        time.sleep(0.02)
+                    assert count(new_t, restarted) >= 10, "the new certificate was refused"
+                    for _ in range(50):  # and the thief a second more, on its new link
+                        thief.put(key, encode(Cmd(thief_t, 0, 1, 0.0, 0.0)))
+                        time.sleep(0.02)
+            watch.undeclare()
+            assert count(thief_t, restarted) == 0, "the revoked certificate still got through"
+    finally:
+        stop(b.proc)

@@ -1,0 +1,120 @@
+"""The localizer's data association: which measured centre is which robot's, and which
+free blob a lost robot may be re-seeded on. Pure functions of predictions, centres and
+what each robot's odometry did."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+
+def assign(predicted: np.ndarray, candidates: np.ndarray, active: np.ndarray,
+           gate_m: float) -> np.ndarray:
+    """For each robot, the index of its measured centre, or -1: minimum total squared
+    distance over robots in ``active``, each pair gated at ``gate_m``."""
+    out = np.full(predicted.shape[0], -1, dtype=int)
+    rows = np.flatnonzero(active)
+    if rows.size == 0 or candidates.shape[0] == 0:
+        return out
+    d2 = ((predicted[rows, None, :] - candidates[None, :, :]) ** 2).sum(axis=2)
+    big = 1e6
+    cost = np.where(d2 <= gate_m * gate_m, d2, big)
+    r_idx, c_idx = linear_sum_assignment(cost)
+    ok = cost[r_idx, c_idx] < big
+    out[rows[r_idx[ok]]] = c_idx[ok]
+    return out
+
+
+@dataclass(frozen=True)
+class Recovery:
+    """How lost robots are matched to free blobs (``recovery``)."""
+
+    lost_after: int = 3  # scans without a measurement before a free blob may re-seed
+    # A lost robot may re-seed on a free blob this far from its prediction, and this much
+    # farther per scan it has been lost: an occluded robot does not jump to a stranger
+    # across the scene, a kidnapped one is found within a few scans of its new place.
+    reach_m: float = 0.25
+    growth_m: float = 0.1
+    # A free blob that stood still (within still_m) over the last still_scans scans is
+    # not a robot whose odometry says it drove more than moved_m meanwhile (a robot
+    # parked in view, waiting to join, is no lost robot that is driving).
+    still_scans: int = 10
+    still_m: float = 0.02
+    moved_m: float = 0.05
+
+
+def still_blobs(centres: np.ndarray, recent: Sequence[np.ndarray], still_m: float
+                ) -> np.ndarray:
+    """For each centre of this scan, whether a centre lay within ``still_m`` of it in
+    every one of the ``recent`` scans' centres (this scan's among them)."""
+    out = np.full(centres.shape[0], True)
+    for earlier in recent:
+        if not out.any():
+            break
+        if earlier.shape[0] == 0:
+            return np.zeros(centres.shape[0], dtype=bool)
+        d = np.hypot(centres[:, None, 0] - earlier[None, :, 0],
+                     centres[:, None, 1] - earlier[None, :, 1])
+        out &= d.min(axis=1) <= still_m
+    return out
+
+
+def recovery(centres: np.ndarray, used: np.ndarray, predicted: np.ndarray,
+             started: np.ndarray, missed: np.ndarray, still: np.ndarray | None,
+             moved: np.ndarray, rules: Recovery) -> list[tuple[int, int]]:
+    """Which lost robot is re-seeded on which free blob (centres not ``used``), as
+    (robot, centre index) pairs.
+
+    With nobody started, robots take the blobs in the order of the edge (robot 0
+    leftmost, the order of the team's initial segments). Otherwise the robots that had
+    a pose and went unmeasured take the free blobs nearest their predictions first
+    (pairs by distance over all of them, not robot by robot), each within its reach
+    (``reach_m`` plus ``growth_m`` per scan unmeasured); one unmeasured for fewer
+    scans than ``lost_after`` only holds the blob it is nearest, without re-seeding.
+    Robots never seeded take what is left in the order of the edge. ``still`` (None
+    while too few scans tell) marks the blobs that stood still; ``moved``, the robots
+    whose odometry drove: a blob that stood still is no robot that drove, and one that
+    moved is no robot never seeded whose wheels stood (one parked, waiting to join). A
+    robot with a pose may take a moving blob though its odometry stood: its wheels may
+    be what failed."""
+    lost = np.flatnonzero(~started | (missed >= rules.lost_after))
+    free = [j for j in range(centres.shape[0]) if not used[j]]
+    if lost.size == 0 or not free:
+        return []
+    if not started.any():
+        order = sorted(free, key=lambda j: float(centres[j, 0]))
+        return list(zip(lost.tolist(), order, strict=False))
+
+    def fits(robot: int, j: int) -> bool:
+        if still is None:
+            return True
+        if still[j]:
+            return not moved[robot]
+        return bool(started[robot] or moved[robot])
+
+    pairs = []
+    for robot in np.flatnonzero(started & (missed > 0)).tolist():
+        reach = rules.reach_m + rules.growth_m * float(missed[robot])
+        for j in free:
+            d = float(np.hypot(*(centres[j] - predicted[robot])))
+            if d <= reach and fits(robot, j):
+                pairs.append((d, robot, j))
+    out: list[tuple[int, int]] = []
+    taken: set[int] = set()
+    for _, robot, j in sorted(pairs):
+        if robot in taken or j not in free:
+            continue
+        free.remove(j)
+        taken.add(robot)
+        if missed[robot] >= rules.lost_after:
+            out.append((robot, j))
+    for robot in lost[~started[lost]].tolist():
+        fitting = [j for j in free if fits(robot, j)]
+        if fitting:
+            j = min(fitting, key=lambda j: float(centres[j, 0]))
+            free.remove(j)
+            out.append((robot, j))
+    return out
