@@ -482,8 +482,10 @@ def run(args: argparse.Namespace) -> int:
             summary = make_report(out)
             print(json.dumps(summary, indent=2))
             print(f"btrack sim: report in {out / 'report.md'}")
-    finally:
-        finish_scene(scene, out, "btrack sim")
+    except BaseException:
+        end_scene(scene)
+        raise
+    finish_scene(scene, out, "btrack sim")
     return 0
 
 
@@ -498,17 +500,27 @@ def start_scene(out: Path, skip: bool) -> subprocess.Popen[str] | None:
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
 
 
+def end_scene(scene: subprocess.Popen[str] | None) -> None:
+    """End ``start_scene``'s process (ours, by its pid) on an interruption: the raw
+    recording stays as it was (the conversion replaces it only once it is whole)."""
+    if scene is not None and scene.poll() is None:
+        scene.kill()
+        scene.wait()
+    if scene is not None:
+        for stream in (scene.stdout, scene.stderr):
+            if stream is not None:
+                stream.close()
+
+
 def finish_scene(scene: subprocess.Popen[str] | None, out: Path, who: str) -> None:
-    """Wait for ``start_scene``'s process and say how it went; on an interruption end
-    it (ours, by its pid), which leaves the raw recording as it was."""
+    """Wait for ``start_scene``'s process and say how it went."""
     if scene is None:
         return
     try:
         stdout, stderr = scene.communicate()
-    finally:
-        if scene.poll() is None:
-            scene.kill()
-            scene.wait()
+    except BaseException:
+        end_scene(scene)
+        raise
     if scene.returncode == 0:
         print(f"{who}: Foxglove channels added to {out / 'run.mcap'} {stdout.strip()} "
               "(layout: docs/foxglove-layout.json)")
