@@ -53,7 +53,8 @@ def one_run(args: argparse.Namespace, live: bool) -> tuple[float, int]:
                                        f"ws://127.0.0.1:{port}", TOPICS, "1000000000",
                                        "100000"], stdout=subprocess.PIPE, text=True)
         if sim.wait() != 0:
-            raise SystemExit(f"bench: btrack sim failed: {sim.stderr.read()[-2000:]}")
+            err = sim.stderr.read() if sim.stderr else ""
+            raise SystemExit(f"bench: btrack sim failed: {err[-2000:]}")
         received = 0
         if client is not None:
             client.terminate()

@@ -68,8 +68,9 @@ def decode(cls: type[T], payload: bytes) -> T:
     floats, integers that are not booleans, no field missing or unknown), many times
     faster than building the map and checking it field by field (bench/decode.py);
     then the message's own range rules (its ``check``)."""
+    spec: Any = cls  # a dataclass type, hashable for the cache
     try:
-        raw = _decoder(cls).decode(payload)
+        raw = _decoder(spec).decode(payload)
     except msgspec.ValidationError as exc:
         raise DecodeError(_reason(str(exc))) from None
     except msgspec.DecodeError as exc:  # not msgpack at all
