@@ -40,8 +40,11 @@ class DepthMap:
     samples of each bin, each where it was taken. Passes land at new offsets sweep
     after sweep, so a step of the algae inside a bin is placed to within the
     samples' spacing, where the bin's one value would put it at the bin's side (on
-    a 1 m step, 5 cm out is 0.05 m^2 of workload). Depths are measured from the ice
-    edge that the in-legs' crossings near the sample give (a line through them)."""
+    a 1 m step, 5 cm out is 0.05 m^2 of workload). A sample keeps where the algae
+    ended (``top_y``), and its depth there is measured again from the ice edge the
+    in-legs' crossings give now (a line through them): the crossings keep coming, so
+    the edge a sample was first measured from (a few crossings, some at full speed,
+    5 mm off on a straight edge) would otherwise stay in the workload for good."""
 
     edge_lo: float
     bin_m: float
@@ -59,9 +62,11 @@ class DepthMap:
     # per bin, the in-legs' crossings of the ice edge: (x, y, weight), WEIGHT's
     crossings: dict[int, list[tuple[float, float, float]]] = field(default_factory=dict)
     _edges: dict[int, tuple[float, float] | None] = field(default_factory=dict)  # fits
-    # bin -> its last KEEP_POINTS samples as (s, depth, kind), the kind before a
-    # sample near the bin's side is marked SUSPECT (its place is known here)
-    points: dict[int, list[tuple[float, float, int]]] = field(default_factory=dict)
+    # bin -> its last KEEP_POINTS samples as (s, depth, kind, top_y), the kind before
+    # a sample near the bin's side is marked SUSPECT (its place is known here); top_y
+    # where the algae ended (None: a depth not measured from the edge, the minimum)
+    points: dict[int, list[tuple[float, float, int, float | None]]] = field(
+        default_factory=dict)
     version: int = 0  # counts every sample recorded and shared depth changed, for caches
     # the profile ``average`` integrates, built for one version: (version, where each
     # piece starts, the integral up to there, each piece's depth)
@@ -76,12 +81,15 @@ class DepthMap:
         """The middle of bin ``b`` along the edge."""
         return self.edge_lo + (b + 0.5) * self.bin_m
 
-    def record(self, s: float, depth: float, kind: int = PRECISE) -> None:
+    def record(self, s: float, depth: float, kind: int = PRECISE,
+               top_y: float | None = None) -> None:
         """A depth sample at ``s``; ROUGH for one taken at full speed. It counts for
-        less (SUSPECT) within SIDE_M of a bin's side."""
+        less (SUSPECT) within SIDE_M of a bin's side. ``top_y``: where the algae ended,
+        if ``depth`` was measured from the ice edge (the profile measures it again from
+        the edge known then, never below ``default_m``, the patrol's minimum depth)."""
         b = self.bin_of(s)
         placed = self.points.setdefault(b, [])
-        placed.append((s, depth, kind))
+        placed.append((s, depth, kind, top_y))
         del placed[:-KEEP_POINTS]
         self.version += 1
         offset = s - self.edge_lo - b * self.bin_m
@@ -117,6 +125,7 @@ class DepthMap:
         del seen[:-KEEP_CROSSINGS]
         for k in range(b - EDGE_POOL_BINS, b + EDGE_POOL_BINS + 1):
             self._edges.pop(k, None)
+        self.version += 1  # the profile's depths near here are measured from the edge
 
     def edge_y(self, s: float) -> float | None:
         """The ice edge at ``s``, None if no in-leg has crossed it near ``s`` yet: the
@@ -209,6 +218,13 @@ class DepthMap:
         return (self._integrate(hi, starts, integral, values)
                 - self._integrate(lo, starts, integral, values)) / (hi - lo)
 
+    def _depth_now(self, s: float, depth: float, top_y: float | None) -> float:
+        """A sample's depth measured from the ice edge as the crossings give it now."""
+        if top_y is None:
+            return depth
+        edge = self.edge_y(s)
+        return depth if edge is None else max(self.default_m, top_y - edge)
+
     @staticmethod
     def _integrate(x: float, starts: list[float], integral: list[float],
                    values: list[float]) -> float:
@@ -230,7 +246,8 @@ class DepthMap:
         sampled bins either side (the nearest one's beyond the last)."""
         if self._integral[0] == self.version:
             return self._integral[1:]
-        own = sorted(p for placed in self.points.values() for p in placed)
+        own = sorted((s, self._depth_now(s, d, top), kind)
+                     for placed in self.points.values() for s, d, kind, top in placed)
         by_bin: dict[int, list[tuple[float, float]]] = {}  # bin -> (place, smoothed depth)
         for (p, _, _), v in zip(own, _smoothed(own), strict=True):
             by_bin.setdefault(self.bin_of(p), []).append((p, v))

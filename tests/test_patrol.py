@@ -267,6 +267,22 @@ def test_depth_map_takes_the_ice_edge_from_many_crossings_nearby():
     assert dm.edge_y(1.5) is None
 
 
+def test_depths_are_measured_again_from_the_edge_the_crossings_give_now():
+    """A sample keeps where the algae ended: as crossings come in, the edge its depth
+    is measured from gets better, and so does the workload's profile."""
+    dm = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3)
+    dm.cross(0.55, 2.01, ROUGH)  # the first crossing, 1 cm high
+    dm.record(0.55, 0.99, top_y=3.0)  # from that edge: 0.99
+    assert dm.average(0.5, 0.6) == pytest.approx(0.99)
+    for _ in range(24):
+        dm.cross(0.55, 2.0)  # slow crossings at 2.0 outweigh it
+    assert dm.average(0.5, 0.6) == pytest.approx(1.0, abs=0.001)
+    dm.record(0.45, 0.3, top_y=None)  # the minimum: not measured from the edge
+    dm.record(0.52, 0.3, top_y=2.1)  # algae ending below the minimum: the minimum
+    assert dm.average(0.4, 0.5) == pytest.approx(0.3)
+    assert min(dm._profile()[2]) == pytest.approx(0.3)
+
+
 def test_the_ice_edge_is_a_line_through_the_crossings_not_their_mean():
     """On a sloped edge the crossings near a robot's segment's end lie all on one
     side: their mean would put the edge (so every depth there) a slope times the
