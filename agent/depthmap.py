@@ -30,13 +30,9 @@ SUSPECT, ROUGH, PRECISE = 0, 1, 2
 # measuring speed against one of 5 cm at full speed.
 WEIGHT = {PRECISE: 25.0, ROUGH: 1.0, SUSPECT: 1.0}
 # A step between two neighbouring samples in different bins lies at the bin's side if
-# the map's steps are on the bin grid (columns 0.1 m wide). The samples say so when
-# the steps they straddle fall on a side this many times as often as inside a bin...
+# the map's steps are on the bin grid (columns 0.1 m wide): the samples say so when
+# the steps they straddle fall on a side this many times as often as inside a bin.
 GRID_TRUST = 4
-# ...and at this share of the sides between two sampled bins at least: columns differ
-# at most sides, where a map of a few steps (one falling between two bins' samples is
-# about as likely on a side as not, with 4 samples a bin) or of slopes rarely does.
-GRID_SHARE = 0.25
 BRIDGE_BINS = 1  # unsampled bins that two samples' middle may reach across
 SMOOTH_M = 0.05  # a depth sample is averaged with the samples this close to it
 AGREE_M = 0.05  # that measured within this of it (across a step they differ more)
@@ -258,20 +254,17 @@ class DepthMap:
         """Whether the steps the samples show lie on the bin grid (columns of the
         bin's width): neighbouring samples that disagree (a step between them, or a
         steep slope) straddle a bin's side GRID_TRUST times as often as they share a
-        bin, and at GRID_SHARE of the sides at least. Samples near a side are left
-        out inside a bin (either column's)."""
+        bin. Samples near a side are left out inside a bin (either column's)."""
         across = within = 0
         for rows in by_bin.values():  # within a bin
             inner = [r for r in rows if self._interior(r[0])]
             within += sum(abs(a[1] - z[1]) > AGREE_M
                           for a, z in zip(inner, inner[1:], strict=False))
         bins = sorted(by_bin)
-        sides = 0
         for b, c in zip(bins, bins[1:], strict=False):  # across a side
-            if c == b + 1:
-                sides += 1
-                across += abs(by_bin[b][-1][1] - by_bin[c][0][1]) > AGREE_M
-        return across > 0 and across >= GRID_SHARE * sides and within * GRID_TRUST <= across
+            if c == b + 1 and abs(by_bin[b][-1][1] - by_bin[c][0][1]) > AGREE_M:
+                across += 1
+        return within * GRID_TRUST <= across
 
     def _interior(self, s: float) -> bool:
         """Whether ``s`` is more than SIDE_M inside its bin."""
