@@ -29,11 +29,6 @@ SUSPECT, ROUGH, PRECISE = 0, 1, 2
 # What a sample or crossing of each kind weighs: inverse variances, a tick of 1 cm at the
 # measuring speed against one of 5 cm at full speed.
 WEIGHT = {PRECISE: 25.0, ROUGH: 1.0, SUSPECT: 1.0}
-# A step between two neighbouring samples in different bins lies at the bin's side if
-# the map's steps are on the bin grid (columns 0.1 m wide): the samples say so when
-# the steps they straddle fall on a side this many times as often as inside a bin.
-GRID_TRUST = 4
-BRIDGE_BINS = 1  # unsampled bins that two samples' middle may reach across
 SMOOTH_M = 0.05  # a depth sample is averaged with the samples this close to it
 AGREE_M = 0.05  # that measured within this of it (across a step they differ more)
 
@@ -250,27 +245,6 @@ class DepthMap:
         return (self._integrate(hi, starts, integral, values)
                 - self._integrate(lo, starts, integral, values)) / (hi - lo)
 
-    def _on_grid(self, by_bin: dict[int, list[tuple[float, float]]]) -> bool:
-        """Whether the steps the samples show lie on the bin grid (columns of the
-        bin's width): neighbouring samples that disagree (a step between them, or a
-        steep slope) straddle a bin's side GRID_TRUST times as often as they share a
-        bin. Samples near a side are left out inside a bin (either column's)."""
-        across = within = 0
-        for rows in by_bin.values():  # within a bin
-            inner = [r for r in rows if self._interior(r[0])]
-            within += sum(abs(a[1] - z[1]) > AGREE_M
-                          for a, z in zip(inner, inner[1:], strict=False))
-        bins = sorted(by_bin)
-        for b, c in zip(bins, bins[1:], strict=False):  # across a side
-            if c == b + 1 and abs(by_bin[b][-1][1] - by_bin[c][0][1]) > AGREE_M:
-                across += 1
-        return within * GRID_TRUST <= across
-
-    def _interior(self, s: float) -> bool:
-        """Whether ``s`` is more than SIDE_M inside its bin."""
-        offset = s - self.edge_lo - self.bin_of(s) * self.bin_m
-        return min(offset, self.bin_m - offset) >= SIDE_M
-
     def _depth_now(self, s: float, depth: float, top_y: float | None) -> float:
         """A sample's depth measured from the ice edge as the crossings give it now."""
         if top_y is None:
@@ -291,15 +265,12 @@ class DepthMap:
         the next starts), the integral up to its start, its depth.
 
         Each sample's depth is first smoothed with the samples near it that agree
-        with it (``_smoothed``). Each sample's depth holds to the middle between it
-        and the next one, a step's place where the samples put it, but for a step
-        between two bins where the samples say steps lie on the bin grid
-        (``_on_grid``), put at the bin's side: columns on the bin grid come out
-        whole. A bin with no sample of its own (or only on its sides) takes a
-        neighbour's value for it, else the line between the nearest sampled bins
-        either side (the nearest one's beyond the last), unless two samples either
-        side of it agree (or steps are not on the grid) and it is no more than
-        BRIDGE_BINS wide: then their middle."""
+        with it (``_smoothed``). A bin with samples is split between them, each
+        stretch the nearest sample's depth, the first and last reaching to the bin's
+        sides: columns on the bin grid come out whole, a step or a slope inside a bin
+        where its samples put it. A bin with no sample of its own (or only on its
+        sides) takes a neighbour's value for it, else the line between the nearest
+        sampled bins either side (the nearest one's beyond the last)."""
         if self._integral[0] == self.version:
             return self._integral[1:]
         own = sorted((s, self._depth_now(s, d, top), kind)
@@ -314,12 +285,6 @@ class DepthMap:
         starts: list[float] = []
         values: list[float] = []
         j = 0  # known[j] is the last sampled bin at or below b
-        # The last sample before bin b, while no more than BRIDGE_BINS bins without
-        # any (and none a neighbour told) lie after it; those bins' fills wait in
-        # ``pending`` until the next sample says whether its middle reaches over them.
-        before: tuple[float, float] | None = None
-        on_grid = self._on_grid(by_bin)
-        pending: list[tuple[float, float]] = []
         for b in range(first, last + 1):
             b_lo = self.edge_lo + b * self.bin_m
             while j + 1 < len(known) and known[j + 1] <= b:
@@ -327,28 +292,16 @@ class DepthMap:
             rows = by_bin.get(b)
             if rows and self.kind.get(b) == SUSPECT and b in self.shared:
                 rows = None  # only samples on its sides, which may be the next column's
-            if rows:
-                # From the last sample below to this bin's first: split in the middle
-                # (as between two samples in a bin), but for a step on a map whose
-                # steps are on the grid, which goes at this bin's side. (At the side,
-                # a ramp's or a bloom's one sample in a bin stood for the whole bin:
-                # on 5 m of them with 6 samples a bin, 1.2-1.5 times the error.)
-                if before is not None and (not on_grid or abs(
-                        before[1] - rows[0][1]) <= AGREE_M):
-                    starts.append(0.5 * (before[0] + rows[0][0]))
-                else:
-                    for piece in pending:
-                        starts.append(piece[0])
-                        values.append(piece[1])
-                    starts.append(b_lo)
+            if rows and len(rows) > 1:
+                starts.append(b_lo)
                 values.append(rows[0][1])
-                pending = []
                 for a, z in zip(rows, rows[1:], strict=False):
                     starts.append(0.5 * (a[0] + z[0]))
                     values.append(z[1])
-                before = rows[-1]
                 continue
-            if b in self.shared:
+            if rows:
+                depth = column[b]
+            elif b in self.shared:
                 depth = self.shared[b]
             elif b < known[0]:
                 depth = column[known[0]]
@@ -358,15 +311,8 @@ class DepthMap:
                 below, above = known[j], known[j + 1]
                 frac = (b - below) / (above - below)
                 depth = (1 - frac) * column[below] + frac * column[above]
-            pending.append((b_lo, depth))
-            if b in self.shared or len(pending) > BRIDGE_BINS:
-                for piece in pending:
-                    starts.append(piece[0])
-                    values.append(piece[1])
-                pending, before = [], None
-        for piece in pending:
-            starts.append(piece[0])
-            values.append(piece[1])
+            starts.append(b_lo)
+            values.append(depth)
         integral = [0.0]
         for k in range(1, len(starts)):
             integral.append(integral[-1] + values[k - 1] * (starts[k] - starts[k - 1]))

@@ -279,29 +279,6 @@ def test_the_ice_edge_is_a_parabola_through_enough_crossings():
         assert dm.edge_y(s) == pytest.approx(bend(s), abs=1e-9)
 
 
-def test_a_step_between_two_bins_is_at_the_side_only_where_steps_are_on_the_grid():
-    """Columns of the bin's width (steps only ever seen across a bin's side): a step
-    between two bins' samples is the bin's side. Once steps show inside bins as well
-    (a step or a steep slope anywhere), it is the middle between the samples."""
-    columns = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3)
-    for b, d in enumerate((0.4, 0.9, 0.5, 1.2)):
-        for s in (0.03, 0.07):
-            columns.record(0.1 * b + s, d)
-    assert columns.average(0.1, 0.2) == pytest.approx(0.9)  # whole columns
-    steps = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3)
-    for s, d in ((0.03, 0.4), (0.07, 0.4), (0.13, 0.9), (0.17, 0.9), (0.23, 0.9),
-                 (0.255, 0.5), (0.275, 0.5), (0.32, 1.2), (0.35, 0.5), (0.38, 1.2)):
-        steps.record(s, d)  # steps inside bins 2 and 3 (twice): not on the grid
-    # between bins 0 and 1 the samples' middle is the side too: 0.4 then 0.9
-    assert steps.average(0.05, 0.15) == pytest.approx(0.65)
-    moved = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3)
-    for s, d in ((0.03, 0.4), (0.05, 0.4), (0.13, 0.9), (0.17, 0.9), (0.23, 0.9),
-                 (0.255, 0.5), (0.275, 0.5), (0.32, 1.2), (0.35, 0.5), (0.38, 1.2)):
-        moved.record(s, d)
-    # the last 0.4 at 0.05, the first 0.9 at 0.13: the step at 0.09, not at 0.1
-    assert moved.average(0.05, 0.15) == pytest.approx((0.04 * 0.4 + 0.06 * 0.9) / 0.1)
-
-
 def test_depths_are_measured_again_from_the_edge_the_crossings_give_now():
     """A sample keeps where the algae ended: as crossings come in, the edge its depth
     is measured from gets better, and so does the workload's profile."""
