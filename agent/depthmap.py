@@ -11,9 +11,15 @@ from dataclasses import dataclass, field
 
 INTERIOR = 0.3  # a pass line within this fraction of a bin from its centre samples it
 SIDE_M = 0.015  # a sample this close to a bin's side may be of the next column
-EDGE_POOL_BINS = 2  # the ice edge at a bin: the crossings of this many bins either side
+# The ice edge at a bin: a parabola through the crossings of this many bins either side.
+# A line through +-0.25 m of a curved edge (waves down to 1.5 m long, 0.6 m high) is
+# 3-5 mm off it, one way over a whole bend, and every depth measured there with it;
+# a parabola through +-0.35 m is within 2 mm, and no worse on a straight edge.
+EDGE_POOL_BINS = 3
 KEEP_CROSSINGS = 16  # per bin
 EDGE_FIT_SPREAD_M = 0.02  # crossings spread less than this along the edge: no slope
+EDGE_CURVE_SPREAD_M = 0.1  # and less than this: no curvature (a line)
+EDGE_CURVE_CROSSINGS = 8  # nor with fewer crossings: a parabola through a few follows their noise
 KEEP_POINTS = 16  # depth samples per bin that the workload's profile keeps, with where
 # How much a depth sample is worth: a leg that crossed the algae's end slowly, measured
 # from a well-known ice edge; one that crossed it at full speed (a tick is 5 cm: an
@@ -40,8 +46,11 @@ class DepthMap:
     samples of each bin, each where it was taken. Passes land at new offsets sweep
     after sweep, so a step of the algae inside a bin is placed to within the
     samples' spacing, where the bin's one value would put it at the bin's side (on
-    a 1 m step, 5 cm out is 0.05 m^2 of workload). Depths are measured from the ice
-    edge that the in-legs' crossings near the sample give (a line through them)."""
+    a 1 m step, 5 cm out is 0.05 m^2 of workload). A sample keeps where the algae
+    ended (``top_y``), and its depth there is measured again from the ice edge the
+    in-legs' crossings give now (a line through them): the crossings keep coming, so
+    the edge a sample was first measured from (a few crossings, some at full speed,
+    5 mm off on a straight edge) would otherwise stay in the workload for good."""
 
     edge_lo: float
     bin_m: float
@@ -58,10 +67,12 @@ class DepthMap:
     shared: dict[int, float] = field(default_factory=dict)
     # per bin, the in-legs' crossings of the ice edge: (x, y, weight), WEIGHT's
     crossings: dict[int, list[tuple[float, float, float]]] = field(default_factory=dict)
-    _edges: dict[int, tuple[float, float] | None] = field(default_factory=dict)  # fits
-    # bin -> its last KEEP_POINTS samples as (s, depth, kind), the kind before a
-    # sample near the bin's side is marked SUSPECT (its place is known here)
-    points: dict[int, list[tuple[float, float, int]]] = field(default_factory=dict)
+    _edges: dict[int, tuple[float, float, float] | None] = field(default_factory=dict)  # fits
+    # bin -> its last KEEP_POINTS samples as (s, depth, kind, top_y), the kind before
+    # a sample near the bin's side is marked SUSPECT (its place is known here); top_y
+    # where the algae ended (None: a depth not measured from the edge, the minimum)
+    points: dict[int, list[tuple[float, float, int, float | None]]] = field(
+        default_factory=dict)
     version: int = 0  # counts every sample recorded and shared depth changed, for caches
     # the profile ``average`` integrates, built for one version: (version, where each
     # piece starts, the integral up to there, each piece's depth)
@@ -76,12 +87,15 @@ class DepthMap:
         """The middle of bin ``b`` along the edge."""
         return self.edge_lo + (b + 0.5) * self.bin_m
 
-    def record(self, s: float, depth: float, kind: int = PRECISE) -> None:
+    def record(self, s: float, depth: float, kind: int = PRECISE,
+               top_y: float | None = None) -> None:
         """A depth sample at ``s``; ROUGH for one taken at full speed. It counts for
-        less (SUSPECT) within SIDE_M of a bin's side."""
+        less (SUSPECT) within SIDE_M of a bin's side. ``top_y``: where the algae ended,
+        if ``depth`` was measured from the ice edge (the profile measures it again from
+        the edge known then, never below ``default_m``, the patrol's minimum depth)."""
         b = self.bin_of(s)
         placed = self.points.setdefault(b, [])
-        placed.append((s, depth, kind))
+        placed.append((s, depth, kind, top_y))
         del placed[:-KEEP_POINTS]
         self.version += 1
         offset = s - self.edge_lo - b * self.bin_m
@@ -117,10 +131,11 @@ class DepthMap:
         del seen[:-KEEP_CROSSINGS]
         for k in range(b - EDGE_POOL_BINS, b + EDGE_POOL_BINS + 1):
             self._edges.pop(k, None)
+        self.version += 1  # the profile's depths near here are measured from the edge
 
     def edge_y(self, s: float) -> float | None:
         """The ice edge at ``s``, None if no in-leg has crossed it near ``s`` yet: the
-        line fitted (weighted by kind) through the crossings within EDGE_POOL_BINS
+        parabola fitted (weighted by kind) through the crossings within EDGE_POOL_BINS
         bins, so a sloped or curved edge is not pulled towards its mean, and noise
         averages out over many crossings made at every offset from the ticks."""
         b = self.bin_of(s)
@@ -129,11 +144,14 @@ class DepthMap:
         fit = self._edges[b]
         if fit is None:
             return None
-        at, slope = fit
-        return at + slope * (s - self.centre(b))
+        at, slope, curve = fit
+        u = s - self.centre(b)
+        return at + u * (slope + u * curve)
 
-    def _fit_edge(self, b: int) -> tuple[float, float] | None:
-        """(the edge at bin ``b``'s centre, its slope) from the crossings near it."""
+    def _fit_edge(self, b: int) -> tuple[float, float, float] | None:
+        """(the edge at bin ``b``'s centre, its slope, half its second derivative) from
+        the crossings near it: weighted least squares, a line or their mean where they
+        spread too little along the edge to tell a curvature or a slope."""
         seen = [c for k in range(b - EDGE_POOL_BINS, b + EDGE_POOL_BINS + 1)
                 for c in self.crossings.get(k, ())]
         if not seen:
@@ -142,11 +160,29 @@ class DepthMap:
         w = sum(c[2] for c in seen)
         mx = sum(c[2] * (c[0] - centre) for c in seen) / w
         my = sum(c[2] * c[1] for c in seen) / w
-        sxx = sum(c[2] * (c[0] - centre - mx) ** 2 for c in seen) / w
-        if sxx < EDGE_FIT_SPREAD_M ** 2:  # all at one place: their mean
-            return my, 0.0
-        slope = sum(c[2] * (c[0] - centre - mx) * (c[1] - my) for c in seen) / (w * sxx)
-        return my - slope * mx, slope
+        # moments about the crossings' mean place, where the normal equations are
+        # best conditioned
+        du = [c[0] - centre - mx for c in seen]
+        dy = [c[1] - my for c in seen]
+        ws = [c[2] for c in seen]
+        s2 = sum(wi * u * u for wi, u in zip(ws, du, strict=True)) / w
+        if s2 < EDGE_FIT_SPREAD_M ** 2:  # all at one place: their mean
+            return my, 0.0, 0.0
+        s3 = sum(wi * u ** 3 for wi, u in zip(ws, du, strict=True)) / w
+        s4 = sum(wi * u ** 4 for wi, u in zip(ws, du, strict=True)) / w
+        t1 = sum(wi * u * v for wi, u, v in zip(ws, du, dy, strict=True)) / w
+        t2 = sum(wi * u * u * v for wi, u, v in zip(ws, du, dy, strict=True)) / w
+        # y - my = a1 u + a2 (u^2 - s2): orthogonal to the constant, so the mean stays
+        det = s2 * (s4 - s2 * s2) - s3 * s3
+        if (s2 < EDGE_CURVE_SPREAD_M ** 2 or len(seen) < EDGE_CURVE_CROSSINGS
+                or det <= 1e-12 * s2 * s4):
+            a1, a2 = t1 / s2, 0.0
+        else:
+            a1 = (t1 * (s4 - s2 * s2) - s3 * t2) / det
+            a2 = (s2 * t2 - s3 * t1) / det
+        # back to the bin's centre: u = v - mx with v the offset from the centre
+        at = my + a1 * (-mx) + a2 * (mx * mx - s2)
+        return at, a1 - 2 * a2 * mx, a2
 
     def learn(self, depths: tuple[tuple[int, float], ...]) -> None:
         """A neighbour's published depths of the bins near its ends."""
@@ -209,6 +245,13 @@ class DepthMap:
         return (self._integrate(hi, starts, integral, values)
                 - self._integrate(lo, starts, integral, values)) / (hi - lo)
 
+    def _depth_now(self, s: float, depth: float, top_y: float | None) -> float:
+        """A sample's depth measured from the ice edge as the crossings give it now."""
+        if top_y is None:
+            return depth
+        edge = self.edge_y(s)
+        return depth if edge is None else max(self.default_m, top_y - edge)
+
     @staticmethod
     def _integrate(x: float, starts: list[float], integral: list[float],
                    values: list[float]) -> float:
@@ -230,7 +273,8 @@ class DepthMap:
         sampled bins either side (the nearest one's beyond the last)."""
         if self._integral[0] == self.version:
             return self._integral[1:]
-        own = sorted(p for placed in self.points.values() for p in placed)
+        own = sorted((s, self._depth_now(s, d, top), kind)
+                     for placed in self.points.values() for s, d, kind, top in placed)
         by_bin: dict[int, list[tuple[float, float]]] = {}  # bin -> (place, smoothed depth)
         for (p, _, _), v in zip(own, _smoothed(own), strict=True):
             by_bin.setdefault(self.bin_of(p), []).append((p, v))

@@ -404,7 +404,8 @@ class Patrol:
                 depth = c.min_depth_m if top is None else max(
                     c.min_depth_m, top - (mid if edge is None else edge))
                 # where the algae was seen, if it was: the leg may have drifted since
-                self.depth_map.record(at, depth, PRECISE if self.out_slow else ROUGH)
+                self.depth_map.record(at, depth, PRECISE if self.out_slow else ROUGH,
+                                      top if edge is not None else None)
 
     def _measured_depth(self, depth: float, prev_y: float | None, y: float) -> float:
         """The patrol depth of this pass: the minimum if algae ended before it, else
@@ -421,6 +422,17 @@ class Patrol:
         if edge is not None:
             measured += self.entry_y - edge
         return max(c.min_depth_m, measured)
+
+    def _algae_top(self, depth: float, prev_y: float | None) -> float | None:
+        """Where this in-leg saw the algae end (the y ``_measured_depth`` measures from
+        the edge); None if its depth is not measured from the edge (the minimum, or
+        the deepest the patrol goes) or no crossing is known here yet."""
+        c = self.config
+        if (depth >= c.max_depth_m or self.algae_depth is None or prev_y is None
+                or self.algae_depth < c.min_depth_m or self.entry_y is None
+                or self.depth_map.edge_y(self.x) is None):
+            return None
+        return self.entry_y + 0.5 * (self.algae_depth + depth)
 
     def step(self, x: float, y: float, theta: float, ice: bool, algae: bool,
              lo: float, hi: float) -> Steer:
@@ -463,7 +475,8 @@ class Patrol:
                     self.last_depth = self._measured_depth(depth, prev_y, y)
                     if self.measures:
                         self.depth_map.record(  # where it was measured
-                            x, self.last_depth, PRECISE if self.was_measuring else ROUGH)
+                            x, self.last_depth, PRECISE if self.was_measuring else ROUGH,
+                            self._algae_top(depth, prev_y))
                     self.turn_depth = self._turn_depth(lo, hi, depth)
             if self.turn_depth is not None and (depth >= self.turn_depth
                                                 or depth >= c.max_depth_m):

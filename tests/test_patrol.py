@@ -262,9 +262,37 @@ def test_depth_map_takes_the_ice_edge_from_many_crossings_nearby():
     assert dm.edge_y(0.55) is None
     for i, err in enumerate((0.02, -0.024, 0.011, -0.007)):
         dm.cross(0.35 + 0.1 * i, 3.0 + err)  # bins 3 to 6
-    assert dm.edge_y(0.55) == pytest.approx(3.0, abs=0.003)  # bins 3-7 pooled
-    assert dm.edge_y(0.15) == pytest.approx(3.02)  # only bin 3 within two bins
+    assert dm.edge_y(0.55) == pytest.approx(3.0, abs=0.003)  # bins 2-8 pooled
+    assert dm.edge_y(0.05) == pytest.approx(3.02)  # only bin 3 within three bins
     assert dm.edge_y(1.5) is None
+
+
+def test_the_ice_edge_is_a_parabola_through_enough_crossings():
+    """On a curved edge a line through +-0.35 m of crossings is millimetres off the
+    bend, all one way; a parabola is not, once there are enough crossings to fit it."""
+    dm = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3)
+    bend = lambda x: 1.0 + 0.3 * x - 0.8 * x * x  # noqa: E731
+    for i in range(40):
+        x = 0.02 + 0.05 * ((i * 0.618) % 1.0) * 14
+        dm.cross(x, bend(x))
+    for s in (0.05, 0.33, 0.61):
+        assert dm.edge_y(s) == pytest.approx(bend(s), abs=1e-9)
+
+
+def test_depths_are_measured_again_from_the_edge_the_crossings_give_now():
+    """A sample keeps where the algae ended: as crossings come in, the edge its depth
+    is measured from gets better, and so does the workload's profile."""
+    dm = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3)
+    dm.cross(0.55, 2.01, ROUGH)  # the first crossing, 1 cm high
+    dm.record(0.55, 0.99, top_y=3.0)  # from that edge: 0.99
+    assert dm.average(0.5, 0.6) == pytest.approx(0.99)
+    for _ in range(24):
+        dm.cross(0.55, 2.0)  # slow crossings at 2.0 outweigh it
+    assert dm.average(0.5, 0.6) == pytest.approx(1.0, abs=0.001)
+    dm.record(0.45, 0.3, top_y=None)  # the minimum: not measured from the edge
+    dm.record(0.52, 0.3, top_y=2.1)  # algae ending below the minimum: the minimum
+    assert dm.average(0.4, 0.5) == pytest.approx(0.3)
+    assert min(dm._profile()[2]) == pytest.approx(0.3)
 
 
 def test_the_ice_edge_is_a_line_through_the_crossings_not_their_mean():
