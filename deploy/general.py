@@ -268,8 +268,14 @@ def main(argv: list[str] | None = None) -> int:
               f"{args.engine}, {args.localization} poses, {args.jobs} at once -> {out}",
               flush=True)
     began = time.monotonic()
+    finished = out / "cases.jsonl"  # each case's row as it finishes: kept if interrupted
+    finished.write_text("")
 
     def progress(row: dict[str, Any], done: int) -> None:
+        from report.summary import json_safe
+
+        with finished.open("a") as f:
+            f.write(json.dumps(json_safe(row)) + "\n")
         if not args.quiet:
             print(f"{bar(done, total)} {time.monotonic() - began:5.0f} s  {_line(row)}",
                   flush=True)
@@ -286,7 +292,8 @@ def main(argv: list[str] | None = None) -> int:
             rows = run_bus(cases, out, args.localization, args.jobs, progress, args.config)
     except KeyboardInterrupt as exc:
         code, word = interrupted_code(exc)
-        print(f"\nbtrack suite general: {word}; every case stopped", file=sys.stderr)
+        print(f"\nbtrack suite general: {word}; every case stopped (the rows of those "
+              f"that finished are in {finished})", file=sys.stderr)
         return code
     wall = time.monotonic() - began
     rows.sort(key=lambda r: r["index"])

@@ -104,6 +104,9 @@ def test_outputs_quote_every_measure_and_the_goals(tmp_path):
     assert "[##" in res.stdout and "2 cases in" in res.stdout
     doc = json.loads((out / "summary.json").read_text())
     assert doc["engine"] == "inprocess" and len(doc["cases"]) == 2
+    # every case's row was also written as it finished, for a suite that is interrupted
+    rows = [json.loads(line) for line in (out / "cases.jsonl").read_text().splitlines()]
+    assert sorted(r["index"] for r in rows) == [0, 1] and all("goals" in r for r in rows)
     for row in doc["cases"]:
         for key in ("phase_sse_rad", "phase_path_sse_rad", "workload_rel_sse",
                     "workload_sse_agents_m2", "revisit_mean_s", "revisit_std_s",
