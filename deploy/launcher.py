@@ -82,6 +82,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scanners", type=int, metavar="N",
                    help="with pf: laser scanners in a row behind the team, each watching "
                    "its share of the edge (default one per 10 m of edge)")
+    p.add_argument("--clouds-every", type=int, metavar="N",
+                   help="with pf: every N ticks the localizer publishes a sample of each "
+                   "robot's particles, which the recording keeps and Foxglove draws")
     p.add_argument("--odom-noise", type=non_negative, metavar="F",
                    help="wheel odometry noise: std of each step's distance as a fraction "
                    "of it (the world's default, 0.02)")
@@ -279,7 +282,7 @@ def _fail(group: ProcessGroup, child: Child, what: str) -> int:
 HIL_REFUSED = (("fault", "--fault"), ("chaos", "--chaos"), ("kidnap", "--kidnap"),
                ("odom_noise", "--odom-noise"), ("odom_turn_noise", "--odom-turn-noise"),
                ("progress_every", "--progress-every"), ("scanners", "--scanners"),
-               ("live", "--live"))
+               ("live", "--live"), ("clouds_every", "--clouds-every"))
 
 
 def hil_refusal(args: argparse.Namespace) -> str | None:
@@ -316,6 +319,11 @@ def refusal(args: argparse.Namespace, bodies: int) -> str | None:
         return f"--scanners must be between 1 and {MAX_SCANNERS}, not {args.scanners}"
     if args.scanners is not None and args.localization not in (None, "pf"):
         return f"--scanners: the laser scans only with --localization pf, not {args.localization}"
+    if args.clouds_every is not None and not args.clouds_every >= 1:
+        return f"--clouds-every must be at least 1, not {args.clouds_every}"
+    if args.clouds_every is not None and args.localization not in (None, "pf"):
+        return (f"--clouds-every: particles come from the localizer, with --localization pf, "
+                f"not {args.localization}")
     if args.ns is not None:
         try:
             Keys(args.ns)
@@ -434,7 +442,9 @@ def run(args: argparse.Namespace) -> int:
             vital: list[Child] = []  # processes the run cannot go on without
             if args.localization == "pf":
                 vital.append(group.start("localizer", [
-                    "localizer", "--robots", str(bodies), "--seed", str(args.seed), *member]))
+                    "localizer", "--robots", str(bodies), "--seed", str(args.seed),
+                    *(["--clouds-every", str(args.clouds_every)] if args.clouds_every else []),
+                    *member]))
             if schedule and not args.quiet:
                 print("btrack sim: faults: " + ", ".join(
                     f"{f.kind}:{f.agent}@{f.at_s:g}" for f in schedule))

@@ -151,7 +151,7 @@ def role_rules(ns: str, role: str) -> list[dict[str, Any]]:
     if role == "laser":  # the LMS bridge: scans only
         return _puts(role, ns, [k.scan()])
     if role == "localizer":  # scans and odometry in, poses out
-        return [*_puts(role, ns, [k.pattern("pose")]),
+        return [*_puts(role, ns, [k.pattern("pose"), k.pattern("particles")]),
                 *_hears(role, [k.scan(), k.pattern("sense")]),
                 _rule(f"{role}-token", "ingress", ["liveliness_token"], [k.alive_localizer()])]
     if role == "recorder":  # hears everything, puts nothing, answers for its progress

@@ -283,6 +283,14 @@ class Localizer:
         self.recover(centres, used)
         return self.estimates(has)
 
+    def cloud(self, size: int) -> list[tuple[list[float], list[float]]]:
+        """Every robot's particles, ``size`` of them taken evenly (for viewers): (x, y)
+        lists per robot. Draws no random numbers, so showing a cloud changes no run."""
+        n = self.config.particles
+        pick = np.linspace(0, n - 1, min(size, n)).astype(int)
+        return [(self.x[r, pick].tolist(), self.y[r, pick].tolist())
+                for r in range(self.robots)]
+
     def estimates(self, measured: np.ndarray) -> list[Estimate]:
         """Every robot's weighted mean pose (circular mean heading) and variances."""
         w = self.w

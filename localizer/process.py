@@ -27,7 +27,8 @@ import numpy as np
 import zenoh
 
 from localizer.core import FilterConfig, Localizer, ScanGeometry
-from wire import DecodeError, Keys, Pose, Scan, Sense, decode, encode
+from wire import DecodeError, Keys, Particles, Pose, Scan, Sense, decode, encode
+from wire.messages import MAX_CLOUD
 from wire.session import add_session_args, declare_publisher, open_session, options_from_args
 
 KEEP_TICKS = 50  # pending ticks kept before the oldest is given up
@@ -50,6 +51,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--gate", type=float, default=d.gate_m,
                    help=f"largest distance from a prediction to its blob, m ({d.gate_m})")
     p.add_argument("--seed", type=int, default=1, help="seed of the filters' noise (1)")
+    p.add_argument("--clouds-every", type=int, default=0, metavar="N",
+                   help="every N scans, also publish a sample of each robot's particles on "
+                   "robot/I/particles, for the recording and viewers (0: never, the default)")
+    p.add_argument("--cloud-size", type=int, default=200, metavar="M",
+                   help=f"particles in each published sample (200, at most {MAX_CLOUD})")
     p.add_argument("--sense-timeout", type=float, default=0.5,
                    help="wall seconds to wait for a robot's sensing of a scanned tick (0.5)")
     add_session_args(p)
@@ -60,7 +66,7 @@ class LocalizerNode:
     """The shell around a ``Localizer``: subscriptions, the per-tick buffer, publishing."""
 
     def __init__(self, session: zenoh.Session, keys: Keys, robots: int, config: FilterConfig,
-                 seed: int, sense_timeout: float):
+                 seed: int, sense_timeout: float, clouds_every: int = 0, cloud_size: int = 200):
         self.keys = keys
         self.n = robots
         self.core = Localizer(robots, config, seed=seed)
@@ -76,6 +82,9 @@ class LocalizerNode:
         self.update_s = 0.0
         self.stopping = False
         self.pub_pose = [declare_publisher(session, keys.pose(i)) for i in range(robots)]
+        self.clouds_every, self.cloud_size = clouds_every, cloud_size
+        self.pub_cloud = ([declare_publisher(session, keys.particles(i)) for i in range(robots)]
+                          if clouds_every else [])
         self.subs = [
             session.declare_subscriber(keys.scan(), self._on("scan")),
             session.declare_subscriber(keys.sense("*"), self._on("sense")),
@@ -154,6 +163,9 @@ class LocalizerNode:
         for i, e in enumerate(estimates):
             pose = Pose(scan.t, k, i, e.x, e.y, e.theta, [e.var_x, e.var_y, e.var_theta], "pf")
             self.pub_pose[i].put(encode(pose))
+        if self.clouds_every and k % self.clouds_every == 0:  # after the poses: off the path
+            for i, (x, y) in enumerate(self.core.cloud(self.cloud_size)):
+                self.pub_cloud[i].put(encode(Particles(scan.t, k, i, x, y)))
         self.last_k = k
         self.scans_done += 1
         for old in [kk for kk in self.senses if kk <= k]:
@@ -193,10 +205,14 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         print(f"btrack localizer: {exc}", file=sys.stderr)
         return 2
+    if args.clouds_every < 0 or not 1 <= args.cloud_size <= MAX_CLOUD:
+        print(f"btrack localizer: --clouds-every must be >= 0 and --cloud-size 1 to "
+              f"{MAX_CLOUD}", file=sys.stderr)
+        return 2
     opts = options_from_args(args)
     with open_session(opts) as session:
         node = LocalizerNode(session, Keys(opts.ns), args.robots, config, args.seed,
-                             args.sense_timeout)
+                             args.sense_timeout, args.clouds_every, args.cloud_size)
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, lambda *_: node.stop())
         try:

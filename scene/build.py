@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import bisect
 import math
+import struct
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from functools import cached_property
@@ -23,7 +24,9 @@ from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
 from foxglove_schemas_protobuf.KeyValuePair_pb2 import KeyValuePair
 from foxglove_schemas_protobuf.LaserScan_pb2 import LaserScan
 from foxglove_schemas_protobuf.LinePrimitive_pb2 import LinePrimitive
+from foxglove_schemas_protobuf.PackedElementField_pb2 import PackedElementField
 from foxglove_schemas_protobuf.Point3_pb2 import Point3
+from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 from foxglove_schemas_protobuf.Pose_pb2 import Pose
 from foxglove_schemas_protobuf.PosesInFrame_pb2 import PosesInFrame
 from foxglove_schemas_protobuf.Quaternion_pb2 import Quaternion
@@ -35,7 +38,7 @@ from foxglove_schemas_protobuf.TriangleListPrimitive_pb2 import TriangleListPrim
 from foxglove_schemas_protobuf.Vector3_pb2 import Vector3
 from google.protobuf.timestamp_pb2 import Timestamp
 
-from wire.messages import AgentState, Scan, Truth, WorldInfo
+from wire.messages import AgentState, Particles, Scan, Truth, WorldInfo
 
 WORLD = "world"  # the one fixed frame
 ICE_ABOVE_M = 3.0  # ice drawn this far above the highest edge point (the maps' own margin)
@@ -52,6 +55,22 @@ POSES_TRUE_TOPIC = "/poses/true"
 POSES_ESTIMATED_TOPIC = "/poses/estimated"
 ERRORS_TOPIC = "/plot/errors"
 SEGMENTS_TOPIC = "/plot/segments"
+
+
+def particles_topic(robot: int) -> str:
+    """Robot ``robot``'s particle cloud (a PointCloud in the world frame)."""
+    return f"/particles/{robot}"
+
+
+def particle_cloud(cloud: Particles, stamp_ns: int) -> PointCloud:
+    """A sample of one robot's particles as a flat cloud in the world frame: x and y
+    as 32-bit floats, z 0 (a millimetre is far above a float's resolution at 30 m)."""
+    fields = [PackedElementField(name=n, offset=4 * j, type=PackedElementField.FLOAT32)
+              for j, n in enumerate(("x", "y", "z"))]
+    data = struct.pack(f"<{3 * len(cloud.x)}f",
+                       *(v for x, y in zip(cloud.x, cloud.y, strict=True) for v in (x, y, 0.0)))
+    return PointCloud(timestamp=stamp(stamp_ns), frame_id=WORLD, pose=pose(0.0, 0.0),
+                      point_stride=12, fields=fields, data=data)
 
 
 def scan_topic(scanner: int) -> str:
@@ -349,5 +368,6 @@ def team_size(ids: Iterable[int], info: WorldInfo | None) -> int:
 __all__ = ["ERRORS_TOPIC", "MAP_TOPIC", "POSES_ESTIMATED_TOPIC", "POSES_TRUE_TOPIC",
            "ROBOTS_TOPIC", "SEGMENTS_SCENE_TOPIC", "SEGMENTS_TOPIC", "TF_TOPIC", "EdgeShape",
            "errors", "frame_transforms", "is_view_topic", "laser_scan", "map_scene",
-           "poses_in_frame", "robot_frame", "robots_scene", "scan_topic", "segments",
+           "particle_cloud", "particles_topic", "poses_in_frame", "robot_frame",
+           "robots_scene", "scan_topic", "segments",
            "segments_scene", "team_size", "truth_poses"]

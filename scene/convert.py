@@ -37,7 +37,7 @@ from mcap.writer import CompressionType, Writer
 
 from scene import build
 from wire.codec import from_record
-from wire.messages import AgentState, Scan, Truth, WorldInfo
+from wire.messages import AgentState, Particles, Scan, Truth, WorldInfo
 
 PLOT_SCHEMAS = {
     build.ERRORS_TOPIC: {
@@ -97,6 +97,7 @@ class Collected:
         default_factory=lambda: defaultdict(dict))
     states: dict[int, dict[int, AgentState]] = field(default_factory=lambda: defaultdict(dict))
     scans: dict[int, dict[int, Scan]] = field(default_factory=lambda: defaultdict(dict))
+    clouds: dict[int, dict[int, Particles]] = field(default_factory=lambda: defaultdict(dict))
     times: dict[int, float] = field(default_factory=dict)  # k -> t
 
     def _seen(self, k: int, t: float, log_ns: int) -> None:
@@ -127,6 +128,10 @@ class Collected:
             state = from_record(AgentState, json.loads(data))
             self.states[state.k][state.robot] = state  # a state sent again replaces it
             self._seen(state.k, state.t, log_ns)
+        elif len(parts) == 3 and parts[0] == "robot" and parts[2] == "particles":
+            cloud = from_record(Particles, json.loads(data))
+            self.clouds[cloud.k][cloud.robot] = cloud
+            self._seen(cloud.k, cloud.t, log_ns)
         elif len(parts) == 3 and parts[0] == "robot" and parts[2] == "pose":
             msg = json.loads(data)
             self.estimated[msg["k"]][msg["robot"]] = (msg["x"], msg["y"], msg["theta"])
@@ -172,6 +177,8 @@ class Collected:
             if true_poses:
                 yield build.TF_TOPIC, ns, build.frame_transforms(true_poses, ns)
                 yield build.POSES_TRUE_TOPIC, ns, build.poses_in_frame(true_poses, ns)
+            for robot, cloud in sorted(self.clouds.get(k, {}).items()):
+                yield build.particles_topic(robot), ns, build.particle_cloud(cloud, ns)
             estimated = self.estimated.get(k, {})
             if estimated:
                 yield build.POSES_ESTIMATED_TOPIC, ns, build.poses_in_frame(estimated, ns)

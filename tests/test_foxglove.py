@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import math
 import shutil
+import struct
 import subprocess
 import sys
 from collections import Counter, defaultdict
@@ -15,6 +16,7 @@ from pathlib import Path
 import pytest
 from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
 from foxglove_schemas_protobuf.LaserScan_pb2 import LaserScan
+from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 from foxglove_schemas_protobuf.PosesInFrame_pb2 import PosesInFrame
 from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
 from mcap.reader import make_reader
@@ -22,7 +24,7 @@ from mcap.reader import make_reader
 from report.load import load_run
 
 OFFICIAL = {cls.DESCRIPTOR.full_name: cls
-            for cls in (LaserScan, FrameTransforms, PosesInFrame, SceneUpdate)}
+            for cls in (LaserScan, FrameTransforms, PosesInFrame, SceneUpdate, PointCloud)}
 
 
 def _read(path: Path):
@@ -55,6 +57,8 @@ def _read(path: Path):
                 raw["scan"][msg["k"], msg["scanner"]] = msg
             elif topic.endswith("/pose"):
                 raw["pose"][msg["k"], msg["robot"]] = msg
+            elif topic.endswith("/particles"):
+                raw["particles"][msg["k"], msg["robot"]] = msg
             elif topic.endswith("/state"):
                 raw["state"][msg["k"], msg["robot"]] = msg
             elif topic == "world/info":
@@ -76,7 +80,7 @@ def test_every_foxglove_channel_decodes_and_matches_the_raw_messages(pf_run):
     # every view channel is a Foxglove well-known schema in protobuf, or plottable JSON
     expected = {"/scan/0", "/scan/1", "/tf", "/poses/true", "/poses/estimated",
                 "/scene/map", "/scene/robots", "/scene/segments", "/plot/errors",
-                "/plot/segments"}
+                "/plot/segments", "/particles/0", "/particles/1"}
     assert set(view) == expected
     for topic, (encoding, schema_encoding, name) in schemas.items():
         if topic.startswith("/plot/"):
@@ -105,6 +109,22 @@ def test_every_foxglove_channel_decodes_and_matches_the_raw_messages(pf_run):
             assert _yaw(scan.pose.orientation) == pytest.approx(src["scanner_theta"])
     hits = sum(sum(scan.intensities) for _, scan in view["/scan/0"] + view["/scan/1"])
     assert hits > 200 * 2 * 3, "the scanners see the robots"
+
+    # each robot's particle cloud (btrack sim --clouds-every 5): the raw sample's points
+    for robot in (0, 1):
+        clouds = view[f"/particles/{robot}"]
+        assert len(clouds) == 40  # ticks 0, 5, ..., 195
+        for log_ns, cloud in clouds:
+            src = raw["particles"][tick_of[log_ns], robot]
+            assert cloud.frame_id == "world" and cloud.point_stride == 12
+            assert [f.name for f in cloud.fields] == ["x", "y", "z"]
+            points = struct.unpack(f"<{len(cloud.data) // 4}f", cloud.data)
+            assert len(src["x"]) == 200 and len(points) == 3 * 200
+            assert points[0::3] == pytest.approx(src["x"], abs=1e-5)
+            assert points[1::3] == pytest.approx(src["y"], abs=1e-5)
+            pose = raw["pose"][tick_of[log_ns], robot]
+            assert math.dist((sum(src["x"]) / 200, sum(src["y"]) / 200),
+                             (pose["x"], pose["y"])) < 0.05  # the cloud is the robot's
 
     # robot i's true pose: world -> robot_i, and index i of the team's poses
     assert len(view["/tf"]) == len(view["/poses/true"]) == len(raw["truth"]) == 200

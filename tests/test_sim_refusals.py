@@ -56,6 +56,9 @@ def _refused(tmp_path: Path, capsys: pytest.CaptureFixture[str], *argv: str) -> 
     (["--map", "no-such-map"], "--map: unknown map 'no-such-map'"),
     (["--scanners", "0"], "--scanners must be between 1 and 16, not 0"),
     (["--scanners", "2", "--localization", "truth"], "--scanners: the laser scans only"),
+    (["--clouds-every", "0"], "--clouds-every must be at least 1, not 0"),
+    (["--clouds-every", "5", "--localization", "odometry"],
+     "--clouds-every: particles come from the localizer"),
     (["--live", "70000"], "--live must be a port between 1 and 65535, not 70000"),
 ])
 def test_sim_refuses_by_name_before_starting_anything(tmp_path, capsys, argv, expected):
@@ -70,6 +73,7 @@ def test_sim_refuses_by_name_before_starting_anything(tmp_path, capsys, argv, ex
     (["--hil", "--localization", "pf"], "--localization pf: not with --hil"),
     (["--hil", "--boot-s", "2"], "--boot-s: not with --hil"),
     (["--hil", "--scanners", "2"], "--scanners: not with --hil"),
+    (["--hil", "--clouds-every", "5"], "--clouds-every: not with --hil"),
     (["--hil", "--live"], "--live: not with --hil"),
     (["--hil-faults", "0.1"], "--hil-faults needs --hil"),
 ])

@@ -41,6 +41,8 @@ class Topic:
 TOPICS: dict[str, Topic] = {t.name: t for t in (
     Topic("sense", "robot/{robot}/sense", messages.Sense),  # world/bridge -> robot i
     Topic("pose", "robot/{robot}/pose", messages.Pose),  # localizer (or world) -> agent i
+    # localizer -> recorder and viewers, when asked: a sample of robot i's particles
+    Topic("particles", "robot/{robot}/particles", messages.Particles),
     Topic("cmd", "robot/{robot}/cmd", messages.Cmd),  # agent i -> its robot
     Topic("state", "agent/{robot}/state", messages.AgentState),  # agent i -> neighbours
     # world/bridge -> localizer: each scanner's scan of each tick, numbered in the Scan
@@ -89,6 +91,9 @@ class Keys:
 
     def pose(self, robot: int | str) -> str:
         return self.key("pose", robot)
+
+    def particles(self, robot: int | str) -> str:
+        return self.key("particles", robot)
 
     def cmd(self, robot: int | str) -> str:
         return self.key("cmd", robot)

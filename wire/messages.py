@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 TWO_PI = 2.0 * math.pi
 MAX_SCANNERS = 16  # laser scanners watching one team
+MAX_CLOUD = 2000  # particles of one robot's cloud in one message
 
 
 class InvalidMessage(ValueError):
@@ -130,6 +131,24 @@ class Truth:
                  "robots, x, y and theta: one entry per robot")
         _require(all(r >= 0 for r in self.robots) and len(set(self.robots)) == n,
                  "robot ids: distinct and non-negative")
+
+
+@dataclass(frozen=True)
+class Particles:
+    """A sample of one robot's particle cloud after scan ``k`` (localizer -> recorder
+    and viewers, only when asked for: ``btrack localizer --clouds-every``): particle
+    j at (``x[j]``, ``y[j]``), drawn evenly from the filter's particles."""
+
+    t: float
+    k: int
+    robot: int
+    x: list[float]
+    y: list[float]
+
+    def check(self) -> None:
+        _require(self.t >= 0 and self.k >= 0 and self.robot >= 0, "negative t, k or robot")
+        _require(len(self.x) == len(self.y) <= MAX_CLOUD, f"x and y: as long as each other, "
+                 f"at most {MAX_CLOUD} particles")
 
 
 @dataclass(frozen=True)
@@ -313,4 +332,4 @@ class Fault:
         _require(self.kind in FAULT_KINDS, f"unknown fault kind {self.kind!r}")
 
 
-ALL_TYPES = (Sense, Pose, Scan, Truth, Cmd, AgentState, Tick, WorldInfo, Fault)
+ALL_TYPES = (Sense, Pose, Scan, Truth, Cmd, AgentState, Tick, WorldInfo, Fault, Particles)
