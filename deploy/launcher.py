@@ -347,6 +347,18 @@ def refusal(args: argparse.Namespace, bodies: int) -> str | None:
     return None
 
 
+def _scanners(args: argparse.Namespace) -> int:
+    """The world's row of scanners: ``--scanners``, else one per 10 m of the map's edge
+    (``simworld.laser.scanner_count``, as the world counts them); the localizer drops a
+    scan of any other row."""
+    if args.scanners is not None:
+        return int(args.scanners)
+    from simworld.laser import scanner_count
+
+    gmap = load_map(args.map, args.scale, args.seed)
+    return scanner_count(gmap.edge_lo, gmap.edge_hi)
+
+
 def _make_out(out: Path) -> str | None:
     """Create the output directory; why not, if it cannot be."""
     try:
@@ -443,6 +455,7 @@ def run(args: argparse.Namespace) -> int:
             if args.localization == "pf":
                 vital.append(group.start("localizer", [
                     "localizer", "--robots", str(bodies), "--seed", str(args.seed),
+                    "--scanners", str(_scanners(args)),
                     *(["--clouds-every", str(args.clouds_every)] if args.clouds_every else []),
                     *member]))
             if schedule and not args.quiet:

@@ -51,6 +51,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--gate", type=float, default=d.gate_m,
                    help=f"largest distance from a prediction to its blob, m ({d.gate_m})")
     p.add_argument("--seed", type=int, default=1, help="seed of the filters' noise (1)")
+    p.add_argument("--scanners", type=int, metavar="N",
+                   help="scans per tick (the world's row of scanners); a scan of another "
+                   "row is dropped (default: the first scan of each tick says)")
     p.add_argument("--clouds-every", type=int, default=0, metavar="N",
                    help="every N scans, also publish a sample of each robot's particles on "
                    "robot/I/particles, for the recording and viewers (0: never, the default)")
@@ -66,7 +69,8 @@ class LocalizerNode:
     """The shell around a ``Localizer``: subscriptions, the per-tick buffer, publishing."""
 
     def __init__(self, session: zenoh.Session, keys: Keys, robots: int, config: FilterConfig,
-                 seed: int, sense_timeout: float, clouds_every: int = 0, cloud_size: int = 200):
+                 seed: int, sense_timeout: float, clouds_every: int = 0, cloud_size: int = 200,
+                 scanners: int | None = None):
         self.keys = keys
         self.n = robots
         self.core = Localizer(robots, config, seed=seed)
@@ -83,6 +87,7 @@ class LocalizerNode:
         self.stopping = False
         self.pub_pose = [declare_publisher(session, keys.pose(i)) for i in range(robots)]
         self.clouds_every, self.cloud_size = clouds_every, cloud_size
+        self.scanners = scanners
         self.pub_cloud = ([declare_publisher(session, keys.particles(i)) for i in range(robots)]
                           if clouds_every else [])
         self.subs = [
@@ -111,6 +116,9 @@ class LocalizerNode:
         try:
             if kind == "scan":
                 scan = decode(Scan, payload)
+                if self.scanners is not None and scan.scanners != self.scanners:
+                    raise DecodeError(f"scan from scanner {scan.scanner} of {scan.scanners}; "
+                                      f"this team has {self.scanners}")
                 if scan.k > self.last_k:
                     row = self.scans.setdefault(scan.k, {})
                     if row and next(iter(row.values())).scanners != scan.scanners:
@@ -212,7 +220,8 @@ def main(argv: list[str] | None = None) -> int:
     opts = options_from_args(args)
     with open_session(opts) as session:
         node = LocalizerNode(session, Keys(opts.ns), args.robots, config, args.seed,
-                             args.sense_timeout, args.clouds_every, args.cloud_size)
+                             args.sense_timeout, args.clouds_every, args.cloud_size,
+                             args.scanners)
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, lambda *_: node.stop())
         try:

@@ -93,13 +93,13 @@ def test_workload_rebalanced_within_ten_cycles(kill_and_freeze):
 def test_chaos_with_a_fourth_robot_joining_keeps_the_edge_covered(tmp_path):
     out = tmp_path / "chaos"
     result = run_sim(out, "--localization", "truth", "--map", "random-algae", "--start",
-                     "in-phase", "--duration", "700", "--chaos", "7", "--fault", "join:3@150",
+                     "in-phase", "--duration", "450", "--chaos", "7", "--fault", "join:3@150",
                      "--no-report")
     assert result.returncode == 0, result.stderr[-3000:]
     pids = json.loads((out / "logs" / "pids.json").read_text())
     assert "agent3" in pids and not [n for n, pid in pids.items() if pid_alive(pid)]
     run = load_run(out)
-    assert_every_tick_recorded(run, 700)
+    assert_every_tick_recorded(run, 450)
     kinds = {f["kind"] for f in run.faults}
     assert "join" in kinds and kinds & {"kill", "freeze"}, run.faults
     assert 3 in run.tick_live[-1] and 3 in run.states

@@ -48,8 +48,8 @@ def test_localizer_process_tracks_two_robots_from_scans_on_the_bus(
             keys.alive_localizer(), lambda s: alive.append(True), history=True)
         pub_scan = declare_publisher(session, keys.scan())
         pub_sense = [declare_publisher(session, keys.sense(i)) for i in (0, 1)]
-        proc = start(["localizer", "--robots", "2", "--seed", "3", *member_args(ns, port)],
-                     tmp_path / "localizer.log")
+        proc = start(["localizer", "--robots", "2", "--seed", "3", "--scanners",
+                      str(len(lasers)), *member_args(ns, port)], tmp_path / "localizer.log")
         try:
             wait_for(lambda: bool(alive), 30, "the localizer's liveliness token")
             step = 0.04  # both drive +y at 0.4 m/s, 10 Hz
@@ -59,13 +59,13 @@ def test_localizer_process_tracks_two_robots_from_scans_on_the_bus(
                 centres = [(x, y + step * k) for x, y in truth]
                 if k == 3:
                     pub_scan.put(b"\x92\x01 not a scan")
+                if k == 5 and len(lasers) > 1:  # a scanner of a row the team has not
+                    pub_scan.put(encode(Scan(t, k, lasers[0].scan(centres), 0.0, -2.0,
+                                             math.pi / 2, scanner=2, scanners=3)))
                 for j in reversed(range(len(lasers))):  # in any order
                     s = lasers[j].scanner
                     pub_scan.put(encode(Scan(t, k, lasers[j].scan(centres), s.x, s.y, s.theta,
                                              scanner=j, scanners=len(lasers))))
-                if k == 5 and len(lasers) > 1:  # a scanner of a row the others are not of
-                    pub_scan.put(encode(Scan(t, k, lasers[0].scan(centres), 0.0, -2.0,
-                                             math.pi / 2, scanner=2, scanners=3)))
                 for i in (0, 1):
                     pub_sense[i].put(encode(Sense(t, k, i, False, False, step if k else 0.0,
                                                   0.0, 0.0, 6.0, 0.1)))
