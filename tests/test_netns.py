@@ -38,7 +38,7 @@ pytestmark = pytest.mark.skipif(REASON is not None, reason=REASON or "")
 ROBOTS = 3
 PORT = 7447
 LEASE_S = 1.0
-CUT_AT_S, REJOIN_AT_S, DURATION_S = 70.0, 80.0, 105.0  # simulated (= wall) time
+CUT_AT_S, REJOIN_AT_S, DURATION_S = 85.0, 95.0, 120.0  # simulated (= wall) time
 DELAY_MS, LOSS = 50.0, 0.05
 # Phase balance on bare ice converges within a patrol cycle, so a run fits the test's
 # time; an 80 s cycle and at least 4 passes per sweep (the team makes 7 on its 2 m
