@@ -95,10 +95,21 @@ def test_the_team_does_as_well_as_without_the_lies(runs):
             assert b[key] <= 1.1 * a[key] + 1e-9, (key, a[key], b[key])
     # the lockstep was not slowed to a tick a second by the stray token
     assert b["speedup"] > 5.0
-    # nobody's segment was pushed: the boundaries the agents published are the clean run's
+    # nobody's segment was pushed: the boundaries the agents published are the clean run's,
+    # to the last bit when neither run's world had to go on without a command (a loaded
+    # machine can make it wait past --cmd-timeout, and then the runs differ by timing, so
+    # only the measures above can be compared)
+    if _world_timeouts(clean) or _world_timeouts(out):
+        return
     ra, rb = load_run(clean), load_run(out)
     for robot in (0, 1, 2):
         n = min(ra.states[robot].t.size, rb.states[robot].t.size)
         assert n >= 390
         assert abs(ra.states[robot].lo[:n] - rb.states[robot].lo[:n]).max() < 1e-9
         assert abs(ra.states[robot].hi[:n] - rb.states[robot].hi[:n]).max() < 1e-9
+
+
+def _world_timeouts(run_dir) -> int:
+    """How often the run's world stepped without a live agent's command (its last line)."""
+    lines = (run_dir / "logs" / "world.out").read_text().strip().splitlines()
+    return int(json.loads(lines[-1])["timeouts"])
