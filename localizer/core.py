@@ -232,6 +232,9 @@ class Localizer:
 
     def recover(self, centres: np.ndarray, used: np.ndarray) -> None:
         """Re-seed lost robots on robot-shaped blobs no robot took (``recovery``)."""
+        lost = ~self.started | (self.missed >= self.rules.lost_after)
+        if not lost.any() or used.all():  # most ticks: nothing to choose, so nothing to
+            return  # measure (still blobs, motion, predictions) for the choice
         known = len(self._recent_centres) == self.rules.still_scans  # enough to tell
         still = still_blobs(centres, self._recent_centres, self.rules.still_m) \
             if known else None
