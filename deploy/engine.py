@@ -125,13 +125,10 @@ class _Localization:
 
     def __init__(self, gmap: GridMap, n: int, case: EngineCase) -> None:
         from localizer.core import FilterConfig, Localizer
-        from simworld.laser import RANGE_NOISE_M, Laser, scanner_row
-        from simworld.maps import LASER_ROOM_M, ROBOT_ROOM_M
+        from simworld.laser import RANGE_NOISE_M, laser_row
 
-        y = -(ROBOT_ROOM_M + LASER_ROOM_M)
-        row = scanner_row(gmap.edge_lo, gmap.edge_hi, y, case.scanners or None)
-        self.lasers = [Laser(s, ROBOT_RADIUS_M, RANGE_NOISE_M, (), case.seed, stream=j)
-                       for j, s in enumerate(row)]
+        self.lasers = laser_row(gmap.edge_lo, gmap.edge_hi, gmap.y_top, case.scanners or None,
+                                RANGE_NOISE_M, case.seed, ROBOT_RADIUS_M)
         self.n = n
         self.core = Localizer(n, FilterConfig(), seed=case.seed)
 

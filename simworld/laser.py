@@ -135,3 +135,17 @@ def scanner_row(edge_lo: float, edge_hi: float, y: float, count: int | None = No
 def box_walls(x0: float, y0: float, x1: float, y1: float) -> list[Segment]:
     """The four walls of the rectangle [x0, x1] x [y0, y1]."""
     return [(x0, y0, x1, y0), (x1, y0, x1, y1), (x1, y1, x0, y1), (x0, y1, x0, y0)]
+
+
+def laser_row(edge_lo: float, edge_hi: float, y_top: float, count: int | None,
+              noise_m: float, seed: int, radius: float, walls: bool = False) -> list[Laser]:
+    """The simulated row of scanners behind a team (``scanner_row``, ``count`` of them
+    or one per 10 m of edge) 1 m behind the start line, each with its own noise stream;
+    ``walls`` boxes the scene 1 m beyond the edge's ends. The world's, and the
+    in-process engine's."""
+    from simworld.maps import LASER_ROOM_M, ROBOT_ROOM_M
+
+    y = -(ROBOT_ROOM_M + LASER_ROOM_M)
+    box = box_walls(edge_lo - 1.0, y - 0.5, edge_hi + 1.0, y_top) if walls else []
+    return [Laser(s, radius, noise_m, box, seed, stream=j)
+            for j, s in enumerate(scanner_row(edge_lo, edge_hi, y, count))]

@@ -28,8 +28,8 @@ from typing import Any
 
 import zenoh
 
-from simworld.laser import Laser, box_walls, scanner_count, scanner_row
-from simworld.maps import LASER_ROOM_M, ROBOT_ROOM_M, MapError, load_map
+from simworld.laser import Laser, laser_row
+from simworld.maps import MapError, load_map
 from simworld.world import ODOM_NOISE, ROBOT_RADIUS_M, World, parse_start
 from wire import (
     Cmd,
@@ -179,14 +179,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def lasers(world: World, args: argparse.Namespace) -> list[Laser]:
-    """The row of scanners behind the team (``scanner_row``), ``--scanners`` of them or
-    one per 10 m of edge, each with its own noise; ``--walls`` boxes the scene."""
-    lo, hi = world.map.edge_lo, world.map.edge_hi
-    count = args.scanners or scanner_count(lo, hi)
-    y = -(ROBOT_ROOM_M + LASER_ROOM_M)
-    walls = box_walls(lo - 1.0, y - 0.5, hi + 1.0, world.map.y_top) if args.walls else []
-    return [Laser(s, ROBOT_RADIUS_M, args.laser_noise, walls, args.seed, stream=j)
-            for j, s in enumerate(scanner_row(lo, hi, y, count))]
+    """The row of scanners behind the team (``laser_row``): ``--scanners`` of them or
+    one per 10 m of edge; ``--walls`` boxes the scene."""
+    m = world.map
+    return laser_row(m.edge_lo, m.edge_hi, m.y_top, args.scanners or None, args.laser_noise,
+                     args.seed, ROBOT_RADIUS_M, args.walls)
 
 
 class WorldProcess:
