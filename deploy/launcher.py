@@ -19,6 +19,7 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import zenoh
 
@@ -497,19 +498,35 @@ def run(args: argparse.Namespace) -> int:
         group.stop_all()
     wall = time.monotonic() - t_wall0
     print(f"\nbtrack sim: run finished in {wall:.1f} s wall; recording {out / 'run.mcap'}")
-    scene = start_scene(out, args.no_scene)
+    report_and_scene(out, args.no_report, args.no_scene, "btrack sim")
+    return 0
+
+
+def report_and_scene(out: Path, no_report: bool, no_scene: bool, name: str,
+                     extra: dict[str, Any] | None = None) -> None:
+    """After a run: the report (``extra`` added to its summary.json) while the Foxglove
+    conversion runs beside it as its own process, then the conversion's end. Without
+    the report, ``extra`` alone is printed."""
+    scene = start_scene(out, no_scene)
     try:
-        if not args.no_report:
+        if no_report:
+            if extra is not None:
+                print(json.dumps(extra, indent=2))
+        else:
             from report.cli import make_report
 
             summary = make_report(out)
+            if extra is not None:
+                from report.summary import write_summary
+
+                summary.update(extra)
+                write_summary(out / "summary.json", summary)
             print(json.dumps(summary, indent=2))
-            print(f"btrack sim: report in {out / 'report.md'}")
+            print(f"{name}: report in {out / 'report.md'}")
     except BaseException:
         end_scene(scene)
         raise
-    finish_scene(scene, out, "btrack sim")
-    return 0
+    finish_scene(scene, out, name)
 
 
 def start_scene(out: Path, skip: bool) -> subprocess.Popen[str] | None:

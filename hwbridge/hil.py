@@ -175,23 +175,7 @@ def run(args: argparse.Namespace) -> int:
     wall = time.monotonic() - began
     hil = hil_stats(out, n)
     print(f"\nbtrack sim --hil: run finished in {wall:.1f} s wall; recording {out / 'run.mcap'}")
-    from deploy.launcher import end_scene, finish_scene, start_scene
+    from deploy.launcher import report_and_scene
 
-    scene = start_scene(out, args.no_scene)
-    try:
-        if args.no_report:
-            print(json.dumps(hil, indent=2))
-        else:
-            from report.cli import make_report
-            from report.summary import write_summary
-
-            summary = make_report(out)
-            summary.update(hil)
-            write_summary(out / "summary.json", summary)
-            print(json.dumps(summary, indent=2))
-            print(f"btrack sim --hil: report in {out / 'report.md'}")
-    except BaseException:
-        end_scene(scene)
-        raise
-    finish_scene(scene, out, "btrack sim --hil")
+    report_and_scene(out, args.no_report, args.no_scene, "btrack sim --hil", extra=hil)
     return 0
