@@ -26,7 +26,7 @@ from recorder import topics
 from scene import build
 from wire.codec import DecodeError, decode
 from wire.keys import Keys
-from wire.messages import MAX_SCANNERS, AgentState, Pose, Scan, Sense, Truth, WorldInfo
+from wire.messages import MAX_SCANNERS, AgentState, Particles, Pose, Scan, Sense, Truth, WorldInfo
 from wire.session import SessionOptions, add_session_args, bounded_session, options_from_args
 
 RING = 4096  # samples held between frames; older ones are dropped
@@ -115,6 +115,11 @@ class LiveView:
                 if state is not None:
                     states[state.robot] = state
                     newest = max(newest, state.k)
+            elif cls is Particles:
+                cloud = self._decode(Particles, payload)
+                if cloud is not None and self._fresh(build.particles_topic(cloud.robot), cloud.k):
+                    out.append((build.particles_topic(cloud.robot),
+                                build.particle_cloud(cloud, stamp_ns)))
         if estimated:
             out.append((build.POSES_ESTIMATED_TOPIC, build.poses_in_frame(estimated,
                                                                           stamp_ns)))

@@ -8,6 +8,7 @@ import base64
 import json
 import shutil
 import socket
+import struct
 import subprocess
 import sys
 import time
@@ -100,3 +101,25 @@ def test_view_refuses_what_it_cannot_join(tmp_path):
                              capture_output=True, text=True, timeout=60)
         assert res.returncode == 2, res.stderr
         assert res.stderr.startswith("btrack view: ") and "Traceback" not in res.stderr
+
+
+def test_the_live_view_serves_each_robots_particles_once_per_scan():
+    """The core of the live view, without a server: a robot's particle sample becomes
+    its /particles/I cloud once, again only for a later scan, and a garbled sample is
+    counted and dropped."""
+    from scene.live import LiveView
+    from wire.codec import encode
+    from wire.messages import Particles
+
+    view = LiveView()
+    cloud = Particles(t=1.0, k=10, robot=1, x=[0.5, 0.75], y=[-1.0, 2.0])
+    view.take("robot/1/particles", encode(cloud))
+    drawn = dict(view.frame(1_000))
+    points = struct.unpack("<6f", drawn["/particles/1"].data)
+    assert points == (0.5, -1.0, 0.0, 0.75, 2.0, 0.0)
+    assert "/particles/1" not in dict(view.frame(2_000))  # the same scan is not sent again
+    view.take("robot/1/particles", encode(Particles(t=1.1, k=11, robot=1, x=[0.0], y=[0.0])))
+    view.take("robot/2/particles", b"\x93garbage")
+    drawn = dict(view.frame(3_000))
+    assert len(drawn["/particles/1"].data) == 12 and "/particles/2" not in drawn
+    assert view.dropped == 1
