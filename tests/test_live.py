@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pytest
 from foxglove_schemas_protobuf.LaserScan_pb2 import LaserScan
+from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
 
 from tests.procutil import end, end_children_of_run, free_port
@@ -26,7 +27,7 @@ CLIENT = Path(__file__).parent / "foxglove_client"
 # in a second or two and a client that started late got only what was left.
 DURATION_S = 15
 TOPICS = ("/scene/map", "/scene/segments", "/scene/robots", "/scan/0", "/tf",
-          "/poses/estimated", "/plot/errors")
+          "/poses/estimated", "/plot/errors", "/particles/0")
 
 
 @pytest.fixture(scope="module")
@@ -57,8 +58,8 @@ def test_a_foxglove_client_watches_the_team_as_it_runs(client_installed, tmp_pat
     out, port = tmp_path / "live", free_port()
     sim = subprocess.Popen(
         [sys.executable, "-m", "btrack", "sim", "--robots", "2", "--duration", str(DURATION_S),
-         "--realtime", "--live", str(port), "--quiet", "--no-report", "--no-scene",
-         "--out", str(out)],
+         "--realtime", "--localization", "pf", "--clouds-every", "5", "--live", str(port),
+         "--quiet", "--no-report", "--no-scene", "--out", str(out)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
         deadline = time.monotonic() + 60
@@ -89,6 +90,8 @@ def test_a_foxglove_client_watches_the_team_as_it_runs(client_installed, tmp_pat
     scene_map = SceneUpdate.FromString(base64.b64decode(seen["/scene/map"]["first"]))
     assert scene_map.entities[0].id == "map" and scene_map.entities[0].triangles
     assert seen["/plot/errors"]["encoding"] == "json"
+    cloud = PointCloud.FromString(base64.b64decode(seen["/particles/0"]["first"]))
+    assert cloud.point_stride == 12 and len(cloud.data) == 12 * 200  # the localizer's sample
     view = json.loads((out / "logs" / "view.out").read_text().splitlines()[-1])
     assert view["frames"] > 10 and view["dropped"] == 0
     recorder = json.loads((out / "logs" / "recorder.out").read_text().splitlines()[-1])
