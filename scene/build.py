@@ -38,6 +38,7 @@ from foxglove_schemas_protobuf.TriangleListPrimitive_pb2 import TriangleListPrim
 from foxglove_schemas_protobuf.Vector3_pb2 import Vector3
 from google.protobuf.timestamp_pb2 import Timestamp
 
+from agent.phase import wrap_pi
 from wire.messages import AgentState, Particles, Scan, Truth, WorldInfo
 
 WORLD = "world"  # the one fixed frame
@@ -326,21 +327,13 @@ def _straight(x0: float, x1: float, above: float = 0.0, z: float = 0.0) -> list[
 
 
 # plottable numbers --------------------------------------------------------------
-def _wrap(a: float) -> float:
-    """An angle in (-pi, pi]."""
-    w = math.fmod(a + math.pi, 2.0 * math.pi)
-    if w < 0:
-        w += 2.0 * math.pi
-    return math.pi - w if w == 0.0 else w - math.pi
-
-
 def errors(states: Mapping[int, AgentState], t: float, k: int) -> dict[str, object]:
     """The phase and workload errors of tick k as the agents see them (their published
     phases and workloads), e_phi,i = wrap(phi_{i+1} - phi_i) and e_Psi,i = Psi_{i+1} -
     Psi_i for each pair of consecutive robots with a state of that tick."""
     ids = sorted(states)
     pairs = list(zip(ids[:-1], ids[1:], strict=True))
-    phase = [_wrap(states[b].phase - states[a].phase) for a, b in pairs]
+    phase = [wrap_pi(states[b].phase - states[a].phase) for a, b in pairs]
     work = [states[b].workload - states[a].workload for a, b in pairs]
     return {"t": t, "k": k, "pairs": [[a, b] for a, b in pairs],
             "phase_rad": phase, "workload_m2": work,
