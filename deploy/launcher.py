@@ -272,8 +272,10 @@ def _schedule(args: argparse.Namespace) -> tuple[list[faults.Fault], int]:
     return schedule, faults.check_schedule(schedule, args.robots)
 
 
-def _fail(group: ProcessGroup, child: Child, what: str) -> int:
-    print(f"\nbtrack sim: {child.name} {what} (exit code {child.proc.returncode}); "
+def fail(group: ProcessGroup, child: Child, what: str, name: str = "btrack sim") -> int:
+    """Say which process failed and how, with the end of its log; end the run's
+    processes; exit code 1 (``btrack sim`` and its hardware loop alike)."""
+    print(f"\n{name}: {child.name} {what} (exit code {child.proc.returncode}); "
           f"its log {child.log_path}:\n{child.log_tail()}", file=sys.stderr)
     group.stop_all()
     return 1
@@ -282,7 +284,7 @@ def _fail(group: ProcessGroup, child: Child, what: str) -> int:
 # What the hardware loop (--hil) does not do yet: refused by name there, never ignored.
 HIL_REFUSED = (("fault", "--fault"), ("chaos", "--chaos"), ("kidnap", "--kidnap"),
                ("odom_noise", "--odom-noise"), ("odom_turn_noise", "--odom-turn-noise"),
-               ("progress_every", "--progress-every"), ("scanners", "--scanners"),
+               ("scanners", "--scanners"),
                ("live", "--live"), ("clouds_every", "--clouds-every"))
 
 
@@ -397,17 +399,17 @@ def run(args: argparse.Namespace) -> int:
     if why is not None:
         print(f"btrack sim: {why}", file=sys.stderr)
         return 2
-    args.out = out
-    if args.hil:  # the hardware stack with emulated devices: hwbridge/hil.py
-        from hwbridge import hil
-
-        return hil.run(args)
     defaults = Gains()
     problems = check_gains(args.robots, defaults.k_phi if args.k_phi is None else args.k_phi,
                            defaults.k_s if args.k_s is None else args.k_s, 2.0)
     if problems:
         print("btrack sim: unstable gains: " + "; ".join(problems), file=sys.stderr)
         return 2
+    args.out = out
+    if args.hil:  # the hardware stack with emulated devices: hwbridge/hil.py
+        from hwbridge import hil
+
+        return hil.run(args)
     ns = args.ns or f"btrack/sim-{os.getpid()}-{int(time.time() * 1000) % 10**9}"
     keys = Keys(ns)
     port = args.port if args.port is not None else free_port()
@@ -429,14 +431,14 @@ def run(args: argparse.Namespace) -> int:
             "record", "--out", str(out), "--ns", ns, "--mode", "router", "--listen", hub,
             "--no-multicast"], nice=BACKGROUND_NICE)
         if not wait_listening(port, recorder, STARTUP_S):
-            return _fail(group, recorder, f"did not listen on {hub} within {STARTUP_S:g} s")
+            return fail(group, recorder, f"did not listen on {hub} within {STARTUP_S:g} s")
         with closed_within(client) as session, group.stopped_on_interrupt():
             monitor = Monitor(session, keys)
             while not monitor.recorder_alive.wait(0.2):
                 if not recorder.alive():
-                    return _fail(group, recorder, "failed to start")
+                    return fail(group, recorder, "failed to start")
                 if time.monotonic() - t_wall0 > STARTUP_S:
-                    return _fail(group, recorder, f"did not come up within {STARTUP_S:g} s")
+                    return fail(group, recorder, f"did not come up within {STARTUP_S:g} s")
             if args.live is not None:  # off the lockstep: a niced client of the router
                 group.start("view", ["view", "--port", str(args.live), "--ns", ns, "--mode",
                                      "client", "--connect", hub, "--no-multicast"],
@@ -588,7 +590,7 @@ def _watch(args: argparse.Namespace, group: ProcessGroup, monitor: Monitor, worl
         dead = injector.unexpected_exit() or (None if recorder.alive() else recorder) or next(
             (c for c in vital if not c.alive()), None)
         if dead is not None:
-            return _fail(group, dead, "exited early")
+            return fail(group, dead, "exited early")
         now = time.monotonic()
         if args.quiet or now - last_print < every:
             continue
@@ -602,7 +604,7 @@ def _watch(args: argparse.Namespace, group: ProcessGroup, monitor: Monitor, worl
             print("\r" + line if tty else line, end="" if tty else "\n", flush=True)
             last_print, last_t, last_wall = now, t, now
     if world.proc.returncode != 0:
-        return _fail(group, world, "failed")
+        return fail(group, world, "failed")
     return 0
 
 

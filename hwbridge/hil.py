@@ -16,7 +16,9 @@ import argparse
 import json
 import os
 import sys
+import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -38,13 +40,6 @@ DEFAULT_FAULTS = 0.005  # one device message in 200 damaged on purpose
 # On the wall clock an agent must not wait for a late neighbour longer than the bridge's
 # watchdog (0.5 s) lets its robot run without a command.
 NEIGHBOUR_TIMEOUT_S = 0.3
-
-
-def _fail(group: ProcessGroup, child: Child, what: str) -> int:
-    print(f"\nbtrack sim --hil: {child.name} {what} (exit code {child.proc.returncode}); "
-          f"its log {child.log_path}:\n{child.log_tail()}", file=sys.stderr)
-    group.stop_all()
-    return 1
 
 
 def hil_stats(out: Path, n: int) -> dict[str, Any]:
@@ -87,64 +82,116 @@ def _wait_paths(paths: list[Path], child: Child, timeout: float) -> bool:
     return True
 
 
+PROGRESS_EVERY_S = 10.0  # wall seconds between the hardware loop's progress lines
+
+
+@dataclass(frozen=True)
+class HilPlan:
+    """Everything the hardware loop takes from ``btrack sim``'s options: ``run`` reads
+    this and never the options, so an option that changes no field here changes
+    nothing (tests/test_sim_refusals.py holds every option to that)."""
+
+    out: Path
+    ns: str
+    port: int
+    robots: int
+    edge: tuple[float, float]  # the map's edge, for the Create bridges
+    commands: dict[str, list[str]]  # each process's btrack command line, by name
+    quiet: bool
+    progress_every_s: float
+    report: bool
+    scene: bool
+
+    @property
+    def devices(self) -> Path:
+        return self.out / "dev"
+
+
+def plan(args: argparse.Namespace, epoch: float) -> HilPlan:
+    """The hardware loop's processes for ``btrack sim --hil`` options that the launcher
+    has checked (``launcher.hil_refusal``): the recorder, the HIL world, a bridge per
+    Create and one for the LMS, and the agents, on the run's ``epoch`` (Unix s).
+    Raises MapError for a map the robots have no room on."""
+    port = free_port() if args.port is None else args.port
+    gmap = load_map(args.map, args.scale, args.seed)
+    gmap.check_room()
+    faults = DEFAULT_FAULTS if args.hil_faults is None else args.hil_faults
+    out: Path = args.out
+    devices = out / "dev"
+    ns = args.ns or f"btrack/hil-{os.getpid()}-{int(time.time() * 1000) % 10**9}"
+    member = SessionOptions(ns=ns, mode="peer", connect=(f"tcp/127.0.0.1:{port}",),
+                            listen=("tcp/127.0.0.1:0",), multicast=False).to_args()
+    on_epoch = ["--epoch", repr(epoch)]
+    n = args.robots
+    edge = f"{gmap.edge_lo!r},{gmap.edge_hi!r}"
+    commands = {
+        "recorder": ["record", "--out", str(out), *member],
+        "hil-world": [
+            "bridge", "hil-world", "--dir", str(devices), "--robots", str(n),
+            "--map", args.map, "--scale", str(args.scale), "--start", args.start,
+            "--seed", str(args.seed), "--duration", str(args.duration),
+            "--faults", str(faults), "--wait-recorder", *on_epoch, *member],
+        **{f"bridge{i}": [
+            "bridge", "create", "--port", str(devices / f"create{i}"), "--id", str(i),
+            "--model", "create", "--edge", edge, *on_epoch, *member] for i in range(n)},
+        "bridge-lms": ["bridge", "lms", "--port", str(devices / "lms"), "--baud", "38400",
+                       *on_epoch, *member],
+        **{f"agent{i}": [
+            "agent", "--id", str(i), "--robots", str(n), "--neighbour-timeout",
+            str(NEIGHBOUR_TIMEOUT_S), *forward_flags(args, AGENT_FLAGS), *member]
+           for i in range(n)},
+    }
+    every = PROGRESS_EVERY_S if args.progress_every is None else args.progress_every
+    return HilPlan(out=out, ns=ns, port=port, robots=n, edge=(gmap.edge_lo, gmap.edge_hi),
+                   commands=commands, quiet=args.quiet, progress_every_s=every,
+                   report=not args.no_report, scene=not args.no_scene)
+
+
 def run(args: argparse.Namespace) -> int:
-    """Run a HIL team from ``btrack sim``'s arguments (plus ``hil_faults``)."""
+    """Run a HIL team from ``btrack sim``'s checked arguments (``args.out`` made)."""
     try:
-        gmap = load_map(args.map, args.scale, args.seed)
-        gmap.check_room()
+        p = plan(args, time.time())
     except MapError as exc:
         print(f"btrack sim --hil: {exc}", file=sys.stderr)
         return 2
-    faults = getattr(args, "hil_faults", None)
-    faults = DEFAULT_FAULTS if faults is None else faults
-    out: Path = args.out or Path("runs") / time.strftime("hil-%Y%m%d-%H%M%S")
-    out.mkdir(parents=True, exist_ok=True)
-    devices = out / "dev"
-    ns = args.ns or f"btrack/hil-{os.getpid()}-{int(time.time() * 1000) % 10**9}"
-    keys = Keys(ns)
-    port = args.port if getattr(args, "port", None) is not None else free_port()
-    hub = SessionOptions(ns=ns, mode="peer", listen=(f"tcp/127.0.0.1:{port}",), multicast=False)
-    member = SessionOptions(ns=ns, mode="peer", connect=(f"tcp/127.0.0.1:{port}",),
-                            listen=("tcp/127.0.0.1:0",), multicast=False).to_args()
-    epoch = ["--epoch", repr(time.time())]
-    group = ProcessGroup(out / "logs")
-    n = args.robots
-    print(f"btrack sim --hil: {n} emulated Creates and an emulated LMS behind the real "
-          f"bridges, map {args.map}, start {args.start}, {args.duration:g} s wall -> {out}")
+    return run_plan(p, args.map, args.start, args.duration)
+
+
+def run_plan(p: HilPlan, map_name: str, start: str, duration: float) -> int:
+    from deploy.launcher import fail, report_and_scene
+
+    name = "btrack sim --hil"
+    keys = Keys(p.ns)
+    hub = SessionOptions(ns=p.ns, mode="peer", listen=(f"tcp/127.0.0.1:{p.port}",),
+                         multicast=False)
+    group = ProcessGroup(p.out / "logs")
+    n = p.robots
+    print(f"{name}: {n} emulated Creates and an emulated LMS behind the real "
+          f"bridges, map {map_name}, start {start}, {duration:g} s wall -> {p.out}")
     began = time.monotonic()
-    recorder_alive = False
+    recorder_up = threading.Event()
     try:
         with open_session(hub) as session:
 
             def on_recorder(sample: zenoh.Sample) -> None:
-                nonlocal recorder_alive
-                recorder_alive = sample.kind == zenoh.SampleKind.PUT
+                if sample.kind == zenoh.SampleKind.PUT:
+                    recorder_up.set()
+                else:
+                    recorder_up.clear()
 
             _sub = session.liveliness().declare_subscriber(keys.alive_recorder(), on_recorder,
                                                            history=True)
-            recorder = group.start("recorder", ["record", "--out", str(out), *member])
-            while not recorder_alive:
+            recorder = group.start("recorder", p.commands["recorder"])
+            while not recorder_up.wait(0.1):
                 if not recorder.alive() or time.monotonic() - began > 60:
-                    return _fail(group, recorder, "did not come up")
-                time.sleep(0.1)
-            world = group.start("hil-world", [
-                "bridge", "hil-world", "--dir", str(devices), "--robots", str(n),
-                "--map", args.map, "--scale", str(args.scale), "--start", args.start,
-                "--seed", str(args.seed), "--duration", str(args.duration),
-                "--faults", str(faults), "--wait-recorder", *epoch, *member])
-            paths = [devices / f"create{i}" for i in range(n)] + [devices / "lms"]
+                    return fail(group, recorder, "did not come up", name)
+            world = group.start("hil-world", p.commands["hil-world"])
+            paths = [p.devices / f"create{i}" for i in range(n)] + [p.devices / "lms"]
             if not _wait_paths(paths, world, 60):
-                return _fail(group, world, "did not create its devices")
-            edge = f"{gmap.edge_lo!r},{gmap.edge_hi!r}"
-            bridges = [group.start(f"bridge{i}", [
-                "bridge", "create", "--port", str(devices / f"create{i}"), "--id", str(i),
-                "--model", "create", "--edge", edge, *epoch, *member]) for i in range(n)]
-            lms = group.start("bridge-lms", ["bridge", "lms", "--port", str(devices / "lms"),
-                                             "--baud", "38400", *epoch, *member])
-            agents = [group.start(f"agent{i}", [
-                "agent", "--id", str(i), "--robots", str(n), "--neighbour-timeout",
-                str(NEIGHBOUR_TIMEOUT_S), *forward_flags(args, AGENT_FLAGS), *member])
-                for i in range(n)]
+                return fail(group, world, "did not create its devices", name)
+            bridges = [group.start(f"bridge{i}", p.commands[f"bridge{i}"]) for i in range(n)]
+            lms = group.start("bridge-lms", p.commands["bridge-lms"])
+            agents = [group.start(f"agent{i}", p.commands[f"agent{i}"]) for i in range(n)]
             last_print = time.monotonic()
             while world.alive() and not world.last_json():
                 try:
@@ -155,12 +202,12 @@ def run(args: argparse.Namespace) -> int:
                     # the recorder ends by itself, cleanly, once it has the done Tick
                     if not child.alive() and not (child is recorder
                                                   and child.proc.returncode == 0):
-                        return _fail(group, child, "exited early")
-                if not args.quiet and time.monotonic() - last_print >= 10:
+                        return fail(group, child, "exited early", name)
+                if not p.quiet and time.monotonic() - last_print >= p.progress_every_s:
                     last_print = time.monotonic()
                     print(f"  {last_print - began:6.0f} s wall", flush=True)
             if not world.alive() and world.proc.returncode != 0:
-                return _fail(group, world, "failed")
+                return fail(group, world, "failed", name)
             try:
                 recorder.proc.wait(20)
             except Exception:
@@ -169,13 +216,11 @@ def run(args: argparse.Namespace) -> int:
                 group.stop(child)
             group.stop_all()
     except KeyboardInterrupt as exc:
-        return stop_interrupted(group, exc, "btrack sim --hil")
+        return stop_interrupted(group, exc, name)
     finally:
         group.stop_all()
     wall = time.monotonic() - began
-    hil = hil_stats(out, n)
-    print(f"\nbtrack sim --hil: run finished in {wall:.1f} s wall; recording {out / 'run.mcap'}")
-    from deploy.launcher import report_and_scene
-
-    report_and_scene(out, args.no_report, args.no_scene, "btrack sim --hil", extra=hil)
+    hil = hil_stats(p.out, n)
+    print(f"\n{name}: run finished in {wall:.1f} s wall; recording {p.out / 'run.mcap'}")
+    report_and_scene(p.out, not p.report, not p.scene, name, extra=hil)
     return 0

@@ -65,27 +65,12 @@ def test_sim_refuses_by_name_before_starting_anything(tmp_path, capsys, argv, ex
     assert expected in _refused(tmp_path, capsys, *argv)
 
 
-@pytest.mark.parametrize(("argv", "expected"), [
-    (["--hil", "--fault", "kill:1@3"], "--fault: not with --hil"),
-    (["--hil", "--chaos", "3"], "--chaos: not with --hil"),
-    (["--hil", "--kidnap", "1@2:0.1,0"], "--kidnap: not with --hil"),
-    (["--hil", "--odom-noise", "0.1"], "--odom-noise: not with --hil"),
-    (["--hil", "--localization", "pf"], "--localization pf: not with --hil"),
-    (["--hil", "--boot-s", "2"], "--boot-s: not with --hil"),
-    (["--hil", "--scanners", "2"], "--scanners: not with --hil"),
-    (["--hil", "--clouds-every", "5"], "--clouds-every: not with --hil"),
-    (["--hil", "--live"], "--live: not with --hil"),
-    (["--hil-faults", "0.1"], "--hil-faults needs --hil"),
-])
-def test_options_the_hardware_loop_would_ignore_are_refused_by_name(tmp_path, capsys, argv,
-                                                                    expected):
-    """Issue 22, item 2: --hil ran the hardware stack and ignored these silently."""
+def test_hardware_faults_need_the_hardware_loop(tmp_path, capsys):
     out = tmp_path / "run"
     code = launcher.main(["--out", str(out), "--duration", "5", "--quiet", "--no-report",
-                          *argv])
-    err = capsys.readouterr().err
-    assert code == 2, err
-    assert expected in err
+                          "--hil-faults", "0.1"])
+    assert code == 2
+    assert "--hil-faults needs --hil" in capsys.readouterr().err
     assert not (out / "logs").exists()
 
 
@@ -121,4 +106,111 @@ def test_the_command_itself_exits_2_without_a_traceback(tmp_path):
     result = run_sim(tmp_path / "run", "--robots", "0", timeout=60)
     assert result.returncode == 2
     assert "--robots must be between 1 and 100" in result.stderr
+    assert "Traceback" not in result.stderr
+
+
+# Issue 22, item 2: every option of ``btrack sim`` under --hil either changes what the
+# hardware loop does (its plan, which is all that ``hil.run`` reads) or is refused by
+# name. A new option lands in none of these tables and fails the first test below.
+HIL_REFUSED = {
+    "fault": ["--fault", "kill:1@60"],
+    "chaos": ["--chaos", "3"],
+    "kidnap": ["--kidnap", "1@2:0.1,0"],
+    "odom_noise": ["--odom-noise", "0.1"],
+    "odom_turn_noise": ["--odom-turn-noise", "0.1"],
+    "localization": ["--localization", "pf"],
+    "boot_s": ["--boot-s", "2"],
+    "scanners": ["--scanners", "2"],
+    "clouds_every": ["--clouds-every", "5"],
+    "live": ["--live"],
+}
+HIL_PLANNED = {
+    "robots": ["--robots", "2"],
+    "map": ["--map", "no-algae"],
+    "scale": ["--scale", "0.04"],
+    "start": ["--start", "in-phase"],
+    "duration": ["--duration", "7"],
+    "seed": ["--seed", "2"],
+    "out": ["--out", "elsewhere"],
+    "config": ["--config", "agent.toml"],
+    "k_s": ["--k-s", "0.01"],
+    "k_phi": ["--k-phi", "0.2"],
+    "cycle_s": ["--cycle-s", "150"],
+    "passes": ["--passes", "3"],
+    "ns": ["--ns", "hil/other"],
+    "port": ["--port", "7999"],
+    "no_report": ["--no-report"],
+    "no_scene": ["--no-scene"],
+    "quiet": ["--quiet"],
+    "progress_every": ["--progress-every", "3"],
+    "hil_faults": ["--hil-faults", "0.1"],
+}
+HIL_ITSELF = {
+    "hil": "the mode",
+    "realtime": "the hardware loop is paced on the wall clock with or without it",
+}
+
+
+def _hil_args(tmp_path: Path, *argv: str):
+    (tmp_path / "agent.toml").write_text("")
+    args = launcher.build_parser().parse_args(
+        ["--hil", "--out", str(tmp_path / "run"), "--ns", "hil/test", "--port", "7998",
+         "--duration", "5", *argv])
+    if args.config is not None:
+        args.config = str(tmp_path / args.config)
+    if args.out.name == "elsewhere":
+        args.out = tmp_path / "elsewhere"
+    return args
+
+
+def test_every_option_is_either_refused_or_planned_with_hil():
+    dests = {a.dest for a in launcher.build_parser()._actions if a.dest != "help"}
+    tables = [set(HIL_REFUSED), set(HIL_PLANNED), set(HIL_ITSELF)]
+    assert sum(map(len, tables)) == len(set().union(*tables)), "an option in two tables"
+    assert dests == set().union(*tables)
+
+
+@pytest.mark.parametrize("dest", sorted(HIL_REFUSED))
+def test_an_option_the_hardware_loop_cannot_follow_is_refused_by_name(tmp_path, capsys, dest):
+    out = tmp_path / "run"
+    code = launcher.main(["--hil", "--out", str(out), "--duration", "90", "--quiet",
+                          *HIL_REFUSED[dest]])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert f"{HIL_REFUSED[dest][0]}" in err and "not with --hil" in err
+    assert "Traceback" not in err
+    assert not (out / "logs").exists()
+
+
+@pytest.mark.parametrize("dest", sorted(HIL_PLANNED))
+def test_an_option_the_hardware_loop_follows_changes_its_plan(tmp_path, dest):
+    from hwbridge import hil
+
+    base, given = _hil_args(tmp_path), _hil_args(tmp_path, *HIL_PLANNED[dest])
+    assert launcher.hil_refusal(given) is None
+    assert launcher.refusal(given, given.robots) is None
+    assert hil.plan(given, 1.0e9) != hil.plan(base, 1.0e9)
+
+
+def test_truth_poses_are_what_the_hardware_loop_runs_on(tmp_path):
+    args = _hil_args(tmp_path, "--localization", "truth")
+    assert launcher.hil_refusal(args) is None
+    for other in ("pf", "odometry"):
+        assert "--localization " + other in (
+            launcher.hil_refusal(_hil_args(tmp_path, "--localization", other)) or "")
+
+
+def test_unstable_gains_are_refused_before_the_hardware_loop_starts(tmp_path, capsys):
+    out = tmp_path / "run"
+    code = launcher.main(["--hil", "--out", str(out), "--k-phi", "0.7", "--quiet"])
+    assert code == 2
+    assert "unstable gains" in capsys.readouterr().err
+    assert not (out / "logs").exists()
+
+
+def test_the_hardware_loop_with_a_fault_exits_2_naming_it(tmp_path):
+    """``btrack sim --hil --fault kill:1@60`` (issue 22): refused, as the command."""
+    result = run_sim(tmp_path / "run", "--hil", "--fault", "kill:1@60", timeout=60)
+    assert result.returncode == 2, result.stderr
+    assert "--fault: not with --hil" in result.stderr
     assert "Traceback" not in result.stderr
