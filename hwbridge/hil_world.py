@@ -39,9 +39,9 @@ from hwbridge.create.model import MODELS
 from hwbridge.emulators.pty import CreateEmulator, Faults, LmsEmulator
 from hwbridge.lms.model import ScanGeometry
 from hwbridge.runclock import RunClock, tick_of
-from simworld.maps import MapError, load_map
+from simworld.shell import WorldShell, load_checked_map
 from simworld.world import ROBOT_RADIUS_M, World, parse_start
-from wire import Keys, Pose, Tick, Truth, WorldInfo, encode
+from wire import Pose, Tick, Truth, encode
 from wire.session import (
     add_session_args,
     bounded_session,
@@ -108,12 +108,13 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-class HilWorld:
+class HilWorld(WorldShell):
+    """The world shell (``simworld.shell``) around a ``World`` stepped on the wall clock
+    behind emulated devices."""
+
     def __init__(self, args: argparse.Namespace, world: World, session: zenoh.Session) -> None:
-        self.args = args
-        self.world = world
-        self.n = world.n
-        self.keys = keys = Keys(args.ns)
+        super().__init__(args, world, session, localization="truth", realtime=True)
+        keys = self.keys
         self.lock = threading.Lock()  # the World, between physics and the laser thread
         self.spec = MODELS["create"]
         args.dir.mkdir(parents=True, exist_ok=True)
@@ -131,26 +132,10 @@ class HilWorld:
                                Faults(garbage=f / 3, corrupt=f / 3, truncate=f / 3,
                                       seed=args.seed * 100 + 99))
         self._sense_inputs()
-        self.events: queue.SimpleQueue[tuple[str, str, object]] = queue.SimpleQueue()
-        self.live: set[int] = set()
-        self.recorder_alive = False
         self.running = False
-        self.stopping = False
         self.dropped = 0
-        put = self.events.put
         self.pub_truth = declare_publisher(session, keys.truth())
         self.pub_pose = [declare_publisher(session, keys.pose(i)) for i in range(self.n)]
-        self.pub_tick = declare_publisher(session, keys.world_tick())
-        self.pub_info = declare_publisher(session, keys.world_info())
-        self._subs = [
-            session.liveliness().declare_subscriber(
-                keys.alive("*"),
-                lambda s: put(("alive", str(s.key_expr), s.kind == zenoh.SampleKind.PUT)),
-                history=True),
-            session.liveliness().declare_subscriber(
-                keys.alive_recorder(),
-                lambda s: put(("recorder", "", s.kind == zenoh.SampleKind.PUT)), history=True),
-        ]
 
     def _ranges(self) -> list[float]:
         with self.lock:
@@ -189,24 +174,6 @@ class HilWorld:
                 emu.device.add_motion(r.odom_dist_m, r.odom_dtheta)
         self._sense_inputs()
 
-    def publish_info(self) -> None:
-        a = self.args
-        self.pub_info.put(encode(WorldInfo(
-            # the map's own name: a procedural map's full spec, which rebuilds it
-            map=self.world.map.name, start=a.start, robots=self.n, localization="truth",
-            seed=a.seed,
-            duration_s=a.duration, dt=a.dt, realtime=True,
-            **self.world.info())))  # type: ignore[arg-type]
-
-    def handle(self, item: tuple[str, str, object]) -> None:
-        kind, key, value = item
-        if kind == "alive":
-            rid = Keys.robot_of(key)
-            if rid is not None and 0 <= rid < self.n:
-                (self.live.add if value else self.live.discard)(rid)
-        elif kind == "recorder":
-            self.recorder_alive = bool(value)
-
     def publish_poses(self, k: int) -> None:
         """Truth and the truth Pose of tick k, at the tick's time on the epoch's grid:
         the same instant the bridges sample their robots' Sense of tick k."""
@@ -221,7 +188,7 @@ class HilWorld:
         """Its own thread: membership events, off the physics loop."""
         while not self.stopping:
             try:
-                self.handle(self.events.get(timeout=0.1))
+                self.membership(self.events.get(timeout=0.1))
             except queue.Empty:
                 pass
 
@@ -262,15 +229,14 @@ class HilWorld:
             self.physics(now - last)
             last = now
             if not self.running:
-                ready = len(self.live) == self.n and (self.recorder_alive or not a.wait_recorder)
-                if ready:
+                if self.ready():
                     self.running = True
                     self.publish_info()
                     next_info, end = now + INFO_EVERY_S, now + a.duration
                     k = tick_of(clock.t(), a.dt) + 1
                     next_tick = clock.mono_at(k * a.dt)
                 elif now > deadline_start:
-                    print(f"btrack bridge hil-world: team not complete after "
+                    print(f"btrack bridge hil-world: {self.waiting_for()} not alive after "
                           f"{a.startup_timeout:g} s (live {sorted(self.live)})", file=sys.stderr)
                     return {"error": "startup timeout"}
             time.sleep(max(0.0, last + step - time.monotonic()))
@@ -278,6 +244,7 @@ class HilWorld:
         self.running = False
         return {
             "hil_world": True, "ticks": ticks, "wall_s": round(wall, 3), "dropped": self.dropped,
+            "rejected": self.rejected,
             "create_frames": [e.frames for e in self.creates],
             "lms_scans": self.lms.scans,
             "faults_injected": sum(e.faults.injected for e in (*self.creates, self.lms)),
@@ -297,20 +264,18 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         parse_start(args.start, args.robots)
-        gmap = load_map(args.map, args.scale, args.seed)
-        gmap.check_room()
-    except (MapError, ValueError) as exc:
+    except ValueError as exc:
         print(f"btrack bridge hil-world: {exc}", file=sys.stderr)
+        return 2
+    gmap = load_checked_map(args, "btrack bridge hil-world")
+    if gmap is None:
         return 2
     world = World(gmap, args.robots, args.start, args.seed, args.odom_noise)
     clock = RunClock(args.epoch)
     with bounded_session(options_from_args(args), "btrack bridge") as session:
         hil = HilWorld(args, world, session)
 
-        def stop() -> None:
-            hil.stopping = True
-
-        on_stop(stop)
+        on_stop(hil.stop)
         hil.start_devices()
         try:
             summary = hil.run(clock)

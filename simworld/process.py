@@ -24,12 +24,11 @@ import queue
 import signal
 import sys
 import time
-from typing import Any
 
 import zenoh
 
 from simworld.laser import Laser, laser_row
-from simworld.maps import MapError, load_map
+from simworld.shell import ALIVE, Event, WorldShell, load_checked_map
 from simworld.world import ODOM_NOISE, ROBOT_RADIUS_M, World, parse_start
 from wire import (
     Cmd,
@@ -40,7 +39,6 @@ from wire import (
     Sense,
     Tick,
     Truth,
-    WorldInfo,
     decode,
     encode,
 )
@@ -56,9 +54,8 @@ log = logging.getLogger("btrack.world")
 
 INFO_EVERY_TICKS = 100
 
-# queue items, built on Zenoh threads: (kind, key, payload-or-flag)
-_ALIVE, _RECORDER, _CMD, _STOP = "alive", "recorder", "cmd", "stop"
-_LOCALIZER, _FAULT = "localizer", "fault"
+# the world's own queue items, beside the shell's membership events
+_CMD, _FAULT = "cmd", "fault"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -186,26 +183,19 @@ def lasers(world: World, args: argparse.Namespace) -> list[Laser]:
                      args.seed, ROBOT_RADIUS_M, args.walls)
 
 
-class WorldProcess:
-    """The shell around a ``World``: publishers, the event queue and the tick loop."""
+class WorldProcess(WorldShell):
+    """The simulator's shell around a ``World`` (``WorldShell`` and its commands, faults
+    and sensing) and its clock: the lockstep or the wall clock."""
 
     def __init__(self, args: argparse.Namespace, world: World, session: zenoh.Session) -> None:
-        self.args = args
-        self.world = world
-        self.n = world.n
-        self.team = set(range(args.team if args.team else world.n))
-        self.dt = float(args.dt)
-        self.keys = Keys(args.ns)
-        self.events: queue.SimpleQueue[tuple[str, str, Any]] = queue.SimpleQueue()
-        self.live: set[int] = set()
+        super().__init__(args, world, session, localization=args.localization,
+                         realtime=bool(args.realtime), localizer=args.localization == "pf",
+                         team=args.team)
         # Live agents that have sent no command since their token came up, and timed out
         # once: not waited for again until they send one (a stray token of an id in
         # range, or a process that is up but does not act, must not stall every tick).
         self.mute: set[int] = set()
         self.silent: set[int] = set()
-        self.rejected = 0  # well-formed but implausible input: foreign tokens
-        self.recorder_alive = False
-        self.localizer_alive = False
         self.lasers = lasers(world, args) if args.localization == "pf" else []
         self.kidnaps = parse_kidnaps(args.kidnap, self.dt)
         self.dropped = 0
@@ -217,7 +207,6 @@ class WorldProcess:
         # whose process the clock holds for until its token is up.
         self.booting: dict[int, float] = {}
         self.awaited: set[int] = set()
-        self.stopping = False
         self.edge_lo, self.edge_hi = world.map.edge_lo, world.map.edge_hi
         self.pose_source = args.localization
         k = self.keys
@@ -228,41 +217,27 @@ class WorldProcess:
         self.pub_truth = pub(k.truth())
         self.pub_sense = [pub(k.sense(i)) for i in range(self.n)]
         self.pub_scan = pub(k.scan())
-        self.pub_tick = pub(k.world_tick())
-        self.pub_info = pub(k.world_info())
         put = self.events.put
         self._subs = [
             session.declare_subscriber(
                 k.cmd("*"), lambda s: put((_CMD, str(s.key_expr), s.payload.to_bytes()))
             ),
-            session.liveliness().declare_subscriber(
-                k.alive("*"),
-                lambda s: put((_ALIVE, str(s.key_expr), s.kind == zenoh.SampleKind.PUT)),
-                history=True,
-            ),
-            session.liveliness().declare_subscriber(
-                k.alive_recorder(),
-                lambda s: put((_RECORDER, str(s.key_expr), s.kind == zenoh.SampleKind.PUT)),
-                history=True,
-            ),
             session.declare_subscriber(
                 k.fault(), lambda s: put((_FAULT, str(s.key_expr), s.payload.to_bytes()))
-            ),
-            session.liveliness().declare_subscriber(
-                k.alive_localizer(),
-                lambda s: put((_LOCALIZER, str(s.key_expr), s.kind == zenoh.SampleKind.PUT)),
-                history=True,
             ),
         ]
 
     # events ------------------------------------------------------------------
-    def stop(self) -> None:
-        """Called from a signal handler: wake the loop and end the run."""
-        self.stopping = True
-        self.events.put((_STOP, "", None))
+    def joined(self, robot: int, up: bool) -> None:
+        if up:
+            self.mute.add(robot)  # until its first command
+            self.awaited.discard(robot)
+        else:
+            self.mute.discard(robot)
+            self.silent.discard(robot)
 
-    def _handle(self, item: tuple[str, str, Any]) -> Cmd | None:
-        """Apply a membership event; return a valid Cmd, or None."""
+    def _handle(self, item: Event) -> Cmd | None:
+        """Apply a membership event, a command or a fault; return a valid Cmd, or None."""
         kind, key, value = item
         if kind == _CMD:
             try:
@@ -276,28 +251,9 @@ class WorldProcess:
             self.mute.discard(cmd.robot)
             self.silent.discard(cmd.robot)
             return cmd
-        if kind == _ALIVE:
-            robot = Keys.robot_of(key)
-            if robot is not None and 0 <= robot < self.n:
-                if value:
-                    self.live.add(robot)
-                    self.mute.add(robot)  # until its first command
-                    self.awaited.discard(robot)
-                else:
-                    self.live.discard(robot)
-                    self.mute.discard(robot)
-                    self.silent.discard(robot)
-                log.info("agent %d %s", robot, "alive" if value else "gone")
-            elif value:  # a token for a robot this world does not have: never waited for
-                self.rejected += 1
-                log.warning("refused a liveliness token %s: no such robot here (0..%d)",
-                            key, self.n - 1)
-        elif kind == _RECORDER:
-            self.recorder_alive = bool(value)
-        elif kind == _LOCALIZER:
-            self.localizer_alive = bool(value)
-            log.info("localizer %s", "alive" if value else "gone")
-        elif kind == _FAULT:
+        if self.membership(item):
+            return None
+        if kind == _FAULT:
             try:
                 fault = decode(Fault, value)
             except DecodeError as exc:
@@ -316,21 +272,6 @@ class WorldProcess:
             log.warning("dropped a command on %s: %s", key, why)
 
     # publishing --------------------------------------------------------------
-    def publish_info(self) -> None:
-        a = self.args
-        info = WorldInfo(
-            map=self.world.map.name,  # a procedural map's full spec, which rebuilds it
-            start=a.start,
-            robots=self.n,
-            localization=a.localization,
-            seed=a.seed,
-            duration_s=a.duration,
-            dt=self.dt,
-            realtime=bool(a.realtime),
-            **self.world.info(),  # type: ignore[arg-type]
-        )
-        self.pub_info.put(encode(info))
-
     def publish_sensing(self, k: int, t: float) -> None:
         world, dt, lo, hi = self.world, self.dt, self.edge_lo, self.edge_hi
         for robot, dx, dy in self.kidnaps.pop(k, []):
@@ -366,9 +307,7 @@ class WorldProcess:
         """Block until all n agents (and the recorder if asked) are alive."""
         deadline = time.monotonic() + self.args.startup_timeout
         while not self.stopping:
-            recorder_ok = self.recorder_alive or not self.args.wait_recorder
-            localizer_ok = self.localizer_alive or not self.lasers
-            if self.live >= self.team and recorder_ok and localizer_ok:
+            if self.ready():
                 return True
             remaining = deadline - time.monotonic()
             if remaining <= 0:
@@ -378,14 +317,8 @@ class WorldProcess:
             except queue.Empty:
                 break
         if not self.stopping:
-            missing = sorted(self.team - self.live)
-            what = f"agents {missing}" if missing else (
-                "the recorder" if not self.recorder_alive and self.args.wait_recorder
-                else "the localizer")
-            print(
-                f"btrack world: {what} not alive after {self.args.startup_timeout:g} s",
-                file=sys.stderr,
-            )
+            print(f"btrack world: {self.waiting_for()} not alive after "
+                  f"{self.args.startup_timeout:g} s", file=sys.stderr)
         return False
 
     def run_lockstep(self, total: int) -> int:
@@ -419,7 +352,7 @@ class WorldProcess:
                 if cmd is not None and cmd.k == k:
                     cmds[cmd.robot] = (cmd.v, cmd.omega)
                     pending.discard(cmd.robot)
-                elif item[0] == _ALIVE:
+                elif item[0] == ALIVE:
                     pending &= self.live  # an agent that left is not waited for
             if self.stopping:
                 break
@@ -549,11 +482,8 @@ def main(argv: list[str] | None = None) -> int:
     if problem:
         print(f"btrack world: {problem}", file=sys.stderr)
         return 2
-    try:
-        gmap = load_map(args.map, args.scale, args.seed)
-        gmap.check_room()
-    except MapError as exc:
-        print(f"btrack world: {exc}", file=sys.stderr)
+    gmap = load_checked_map(args, "btrack world")
+    if gmap is None:
         return 2
     world = World(gmap, args.robots, args.start, args.seed, args.odom_noise, args.team,
                   odom_turn_noise=args.odom_turn_noise)
