@@ -4,6 +4,7 @@ neighbour's key (counted and dropped)."""
 
 from __future__ import annotations
 
+import itertools
 import math
 import queue
 import subprocess
@@ -163,13 +164,24 @@ def test_agent_restarted_hearing_nobody_yet_stands_still_before_claiming_alone(b
     (1 s) with nobody heard does it take the edge as a team of one."""
     session = bus[2]
     with agent1(bus, tmp_path / "agent.log") as (_, keys, states, cmds):
-        for k in (500, 501):
+        # The test's world ticks every 0.1 s of the wall clock, as a real one would, until
+        # the agent acts (its first state) or the deadline.
+        deadline, stood = time.monotonic() + 20.0, []
+        for k in itertools.count(500):
+            assert time.monotonic() < deadline, f"still standing still after tick {k - 1}"
             sense_and_pose(session, keys, k)
-            assert (cmds.get(timeout=10).v, states.empty()) == (0.0, True)
-        time.sleep(1.2)  # past JOIN_WAIT_S, and still nobody alive
-        sense_and_pose(session, keys, 502)
-        state = states.get(timeout=10)
-        assert (state.k, state.lower, state.upper, state.lo, state.hi) == (502, -1, -1, 0.0, 6.0)
+            cmd = cmds.get(timeout=10)
+            assert cmd.k == k
+            still = (cmd.v, cmd.omega) == (0.0, 0.0)
+            try:
+                state = states.get(timeout=0.1 if still else 10)
+                break
+            except queue.Empty:
+                assert still, "a command without a state"
+                stood.append(k)
+        assert stood[:2] == [500, 501], stood  # nobody heard: no claim at once
+        assert (state.lower, state.upper, state.lo, state.hi) == (-1, -1, 0.0, 6.0)
+        assert state.k >= stood[-1]  # (a state late for its tick counts it as stood)
 
 
 def test_agent_acts_on_a_sense_that_carries_its_pose(bus, tmp_path):
