@@ -34,6 +34,7 @@ from lockstep import DEFAULT_MAP, DT_S, load, positive_float, team_size  # noqa:
 from speed import sim_command, world_summary  # noqa: E402
 
 TICKS_PER_S = os.sysconf("SC_CLK_TCK")
+PSS_EVERY = 20  # readings of /proc between two of PSS
 ROLES = ("world", "agent", "localizer", "recorder", "launcher", "other")
 PROFILE_ENV = "BTRACK_BENCH_PROFILE"  # where the profiled processes write their stats
 # Imported by every Python process of a profiled run (it is on their PYTHONPATH): it
@@ -63,6 +64,7 @@ class Sampled:
     samples: list[tuple[float, float, float]] = field(default_factory=list)  # wall, all, main
     rss_mb: float = 0.0
     anon_mb: float = 0.0
+    pss_mb: float = 0.0  # its share of the pages it shares (the libraries), plus its own
     threads: int = 0
 
     def cpu_since(self, t0: float) -> tuple[float, float]:
@@ -105,7 +107,9 @@ def children_of(root: int) -> set[int]:
     return found
 
 
-def sample(root: int, seen: dict[int, Sampled]) -> None:
+def sample(root: int, seen: dict[int, Sampled], rollup: bool) -> None:
+    """One reading of every process below ``root``; with ``rollup`` also its PSS (that
+    walks its page tables, so it is read seldom)."""
     now = time.monotonic()
     for pid in children_of(root):
         try:
@@ -125,13 +129,20 @@ def sample(root: int, seen: dict[int, Sampled]) -> None:
         proc.rss_mb = int(status["VmRSS"].split()[0]) / 1024
         proc.anon_mb = int(status["RssAnon"].split()[0]) / 1024
         proc.threads = int(status["Threads"])
+        if rollup:
+            try:
+                with open(f"/proc/{pid}/smaps_rollup") as f:
+                    pss = next(line for line in f if line.startswith("Pss:"))
+                proc.pss_mb = int(pss.split()[1]) / 1024
+            except (OSError, StopIteration):
+                pass
 
 
 def timed_run(n: int, args: argparse.Namespace, profile_dir: str | None
               ) -> tuple[dict[int, Sampled], dict[str, float | int], float]:
     """One run with every process sampled; its processes, the world's summary and the
     wall time of the world's first tick."""
-    env = dict(os.environ)
+    env = dict(os.environ, **dict(kv.split("=", 1) for kv in args.env))
     if profile_dir:
         (Path(profile_dir) / "sitecustomize.py").write_text(SITECUSTOMIZE)
         env[PROFILE_ENV] = profile_dir
@@ -143,8 +154,10 @@ def timed_run(n: int, args: argparse.Namespace, profile_dir: str | None
         launcher = subprocess.Popen(sim_command(n, args.duration, args.map, "truth", out),
                                     stdout=subprocess.DEVNULL, env=env)
         try:
+            readings = 0
             while launcher.poll() is None:
-                sample(launcher.pid, seen)
+                sample(launcher.pid, seen, readings % PSS_EVERY == 0)
+                readings += 1
                 time.sleep(args.sample_s)
         finally:
             if launcher.poll() is None:
@@ -185,8 +198,8 @@ def print_processes(n: int, seen: dict[int, Sampled], ticks: int, first_tick: fl
     print(f"\n{n} robots: CPU ms per tick from the first tick to each process's end; "
           "resident MB at the last sample")
     print("| process | count | CPU ms/tick (all) | main thread | other threads "
-          "| RSS MB (each, median) | anon MB | threads |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+          "| RSS MB (each, median) | anon MB | PSS MB | threads |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     grand = 0.0
     for role in ROLES:
         procs = [p for p in seen.values() if p.role == role and p.samples]
@@ -200,8 +213,16 @@ def print_processes(n: int, seen: dict[int, Sampled], ticks: int, first_tick: fl
         print(f"| {role} | {len(procs)} | {whole:.3f}{each} | {main:.3f} | {whole - main:.3f} "
               f"| {statistics.median(p.rss_mb for p in procs):.1f} "
               f"| {statistics.median(p.anon_mb for p in procs):.1f} "
+              f"| {statistics.median(p.pss_mb for p in procs):.1f} "
               f"| {statistics.median(p.threads for p in procs):.0f} |")
-    print(f"| all | {len(seen)} | {grand:.3f} | | | | | |")
+    print(f"| all | {len(seen)} | {grand:.3f} | | | | | | |")
+
+
+def env_setting(text: str) -> str:
+    name, eq, _ = text.partition("=")
+    if not eq or not name.isidentifier():
+        raise argparse.ArgumentTypeError(f"not NAME=VALUE: {text!r}")
+    return text
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -215,6 +236,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "straight procedural edge)")
     p.add_argument("--profile", action="store_true",
                    help="also a run of each size with the world and agent 0 under cProfile")
+    p.add_argument("--env", action="append", default=[], metavar="NAME=VALUE",
+                   type=env_setting, help="set in the run's environment, e.g. "
+                   "ZENOH_CONFIG=FILE.json5 or MALLOC_ARENA_MAX=2 (repeatable)")
     p.add_argument("--top", type=int, default=0, metavar="N",
                    help="with --profile: also print each profile's N costliest functions")
     p.add_argument("--sample-s", type=positive_float, default=0.1,
