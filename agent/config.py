@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -47,6 +46,8 @@ def load(path: str | Path | None, overrides: dict[str, dict[str, Any]] | None = 
     apply ``overrides`` (section -> key -> value) from the command line."""
     data: dict[str, Any] = {}
     if path is not None:
+        import tomllib  # only with a file: an agent started without one never needs it
+
         try:
             data = tomllib.loads(Path(path).read_text())
         except FileNotFoundError:

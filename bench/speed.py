@@ -23,6 +23,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 
 def main() -> int:
@@ -71,6 +72,30 @@ def bare_speedup(n: int, duration: float, loc: str) -> float:
             group.stop_all()
 
 
+def sim_command(n: int, duration: float, gmap: str, loc: str, out: Path) -> list[str]:
+    """The ``btrack sim`` command line of a timed run: no progress, report or scene."""
+    return [sys.executable, "-m", "btrack", "sim", "--robots", str(n), "--map", gmap,
+            "--localization", loc, "--duration", str(duration), "--out", str(out),
+            "--quiet", "--no-report", "--no-scene"]
+
+
+def world_summary(out: Path) -> dict[str, Any]:
+    """The world's closing line of a finished run in ``out``: ticks, wall_s, speedup."""
+    log = (out / "logs" / "world.out").read_text().strip().splitlines()[-1]
+    summary: dict[str, Any] = json.loads(log)
+    return summary
+
+
+def team_run(n: int, duration: float, gmap: str, loc: str) -> tuple[dict[str, Any], float]:
+    """One ``btrack sim`` run: the world's closing line and the whole command's wall s."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "run"
+        began = time.monotonic()
+        subprocess.run(sim_command(n, duration, gmap, loc, out), check=True,
+                       stdout=subprocess.DEVNULL)
+        return world_summary(out), time.monotonic() - began
+
+
 def run_team_sizes(args: argparse.Namespace, loc: str) -> None:
     for n in args.robots:
         if args.bare and loc != "pf":
@@ -80,18 +105,9 @@ def run_team_sizes(args: argparse.Namespace, loc: str) -> None:
                   flush=True)
         worlds, commands = [], []
         for _ in range(args.repeat):
-            with tempfile.TemporaryDirectory() as tmp:
-                out = Path(tmp) / "run"
-                began = time.monotonic()
-                subprocess.run(
-                    [sys.executable, "-m", "btrack", "sim", "--robots", str(n), "--map",
-                     args.map, "--localization", loc, "--duration", str(args.duration),
-                     "--out", str(out), "--quiet", "--no-report", "--no-scene"],
-                    check=True, stdout=subprocess.DEVNULL,
-                )
-                commands.append(time.monotonic() - began)
-                log = (out / "logs" / "world.out").read_text().strip().splitlines()[-1]
-                worlds.append(json.loads(log))
+            world, command_s = team_run(n, args.duration, args.map, loc)
+            worlds.append(world)
+            commands.append(command_s)
         speeds = [w["speedup"] for w in worlds]
         walls = [w["wall_s"] for w in worlds]
         wall = statistics.median(walls)

@@ -8,6 +8,7 @@ import itertools
 import math
 import queue
 import subprocess
+import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -223,3 +224,20 @@ def test_agent_refuses_bad_config_file(tmp_path):
     finally:
         end(proc)
     assert "k_bogus" in (tmp_path / "a.log").read_text()
+
+
+HEAVY = ("numpy", "scipy", "matplotlib", "report", "scene", "simworld", "deploy", "mcap",
+         "foxglove_websocket", "PIL", "tomllib")
+
+
+def test_an_agent_imports_only_what_it_needs():
+    """``btrack agent`` loads neither the simulator nor the report's numerical stack
+    (issue 21: every robot is a process, and their memory adds up); the modules are
+    read from ``-X importtime``, so nothing is started."""
+    res = subprocess.run([sys.executable, "-X", "importtime", "-m", "btrack", "agent", "--help"],
+                         capture_output=True, text=True, timeout=30)
+    assert res.returncode == 0, res.stderr[-2000:]
+    loaded = {line.rsplit("|", 1)[1].strip().split(".")[0]
+              for line in res.stderr.splitlines() if line.startswith("import time:")}
+    assert "agent" in loaded and "zenoh" in loaded
+    assert not loaded & set(HEAVY), sorted(loaded & set(HEAVY))
