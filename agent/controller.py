@@ -286,7 +286,7 @@ class Controller:
         if steer.motion in (Motion.ENTER, Motion.UNDER, Motion.EXIT):
             if wrap_pi(self.phase_des - phase) < -AHEAD_WAIT_RAD:
                 return 0.0  # well ahead of the team (one started ahead): let it come
-            level = position_to_phase(p.line_x, self.lo, self.hi, p.direction)
+            level = position_to_phase(p.grid_x, self.lo, self.hi, p.direction)
             middle = level + 0.5 * math.pi / p.passes
             time_left = wrap_pi(middle - lead - self.phase_des) / rate
             fast, slow = p.to_go(y, self.lo, self.hi)
@@ -295,8 +295,8 @@ class Controller:
         if p.turned > 0.05:
             return self._arc_speed(steer, dt)
         if p.hurry or arc_may_begin(
-                self.phase_des, position_to_phase(p.arc_from_x, self.lo, self.hi, p.direction),
-                position_to_phase(p.line_x, self.lo, self.hi, p.direction), lead):
+                self.phase_des, position_to_phase(p.arc_from_grid, self.lo, self.hi, p.direction),
+                position_to_phase(p.grid_x, self.lo, self.hi, p.direction), lead):
             return lim.v_max
         return 0.0
 

@@ -65,6 +65,16 @@ class PatrolConfig:
     # phase does; it costs distance, not time (the team's rate is set by the deepest
     # pass anyway). Off: turn past the algae, as the thesis's patrol.
     even_legs: bool = True
+    # A pass line may move off the team's grid by up to this fraction of a pass onto
+    # the middle of a column of its segment that has no depth measured yet, so that a
+    # long segment (a pass of 0.3 m is three columns) is covered within a few sweeps
+    # rather than as the grid's offsets happen to fall. The arcs keep the grid's time
+    # (the controller paces by ``grid_x``): the cost is a position phase of at most
+    # pi * aim_fraction / passes during that leg.
+    aim_fraction: float = 0.25
+    # Legs never further apart than this, aimed or not: a point of the edge between two
+    # is then within a robot's radius (0.17 m) of one of them, seen every sweep.
+    cover_m: float = 0.34
 
     def __post_init__(self) -> None:
         if self.passes_per_sweep < 1:
@@ -81,6 +91,10 @@ class PatrolConfig:
             raise ValueError("measure_zone_m must be >= 0 and measure_speed positive")
         if self.edge_zone_m < 0 or self.turn_margin_m < 0:
             raise ValueError("edge_zone_m and turn_margin_m must be >= 0")
+        if not 0 <= self.aim_fraction <= 0.5:
+            raise ValueError("aim_fraction must be in [0, 0.5] (of a pass)")
+        if self.cover_m < self.max_spacing_m:
+            raise ValueError("cover_m must be at least max_spacing_m")
 
 
 @dataclass(frozen=True)
@@ -103,6 +117,10 @@ class Patrol:
         self.direction = 1 if direction >= 0 else -1
         self.line_x = x  # the pass line the straight legs hold
         self.arc_from_x = x  # the line the last arc left
+        # The same two on the team's grid, which the arcs are timed by and the next
+        # line is planned from: the line itself but when aimed at a new column.
+        self.grid_x = x
+        self.arc_from_grid = x
         self.x = x  # where the robot is
         self.clock: float | None = None  # the team's sweep clock, set by the controller
         self.entry_y: float | None = None  # where the ice edge was seen on the way in
@@ -147,42 +165,43 @@ class Patrol:
         begins a new sweep. Changes nothing."""
         c = self.config
         step = self.spacing(lo, hi)
-        if not lo - ON_LINE_M <= self.line_x <= hi + ON_LINE_M:
+        if not lo - ON_LINE_M <= self.grid_x <= hi + ON_LINE_M:
             # The segment moved away from under the robot: head back at the widest pass.
             # (A line that the sum of its passes puts a rounding error past an end is
             # on it: taken for outside, it cost a 0.4 m pass off the team's grid.)
             # Onto its first pass, half a pass inside, in arcs of at most the widest pass.
-            direction = 1 if self.line_x < lo else -1
+            direction = 1 if self.grid_x < lo else -1
             target = lo + 0.5 * step if direction > 0 else hi - 0.5 * step
-            jump = min(2 * c.max_turn_radius_m, abs(target - self.line_x))
-            return self.line_x + direction * jump, direction, False
+            jump = min(2 * c.max_turn_radius_m, abs(target - self.grid_x))
+            return self.grid_x + direction * jump, direction, False
         direction = self.direction
-        nxt = self.line_x + direction * step
+        nxt = self.grid_x + direction * step
         if lo <= nxt <= hi:
             return nxt, direction, False
         # the last pass stops a little inside the end: exactly on the edge's end a
         # robot wobbling off the ice's side would see 'no ice' under the ice
         end = hi - c.end_inset_m if direction > 0 else lo + c.end_inset_m
-        room = max(0.0, (end - self.line_x) * direction)
+        room = max(0.0, (end - self.grid_x) * direction)
         if room >= 0.25 * step:
-            return self.line_x + direction * room, direction, False  # a short last pass
+            return self.grid_x + direction * room, direction, False  # a short last pass
         direction = -direction
         length = self._first_pass(lo, hi, step, heading_in, direction)
-        line = self.line_x + direction * length
+        line = self.grid_x + direction * length
         if not lo <= line <= hi:  # narrower than a pass: head for the middle
-            direction = 1 if self.line_x < 0.5 * (lo + hi) else -1
-            line = self.line_x + direction * length
+            direction = 1 if self.grid_x < 0.5 * (lo + hi) else -1
+            line = self.grid_x + direction * length
         return line, direction, True
 
     def _start_turn(self, lo: float, hi: float, heading_in: bool) -> None:
         """Choose the next pass line, then the arc from where the robot is onto it."""
         line, direction, new_sweep = self._plan(lo, hi, heading_in)
-        self.arc_from_x = self.line_x
+        self.arc_from_x, self.arc_from_grid = self.line_x, self.grid_x
         self.sweeps += new_sweep
         if new_sweep:
             self.passes = self.team_passes
         self.direction = direction
-        self.line_x = line
+        self.grid_x = line
+        self.line_x = self._aim(line, lo, hi)
         self.turn_radius = self._arc_radius(abs(line - self.x))
         # Heading +y, going +x is a right (clockwise) turn; heading -y it is a left one.
         self.turn_sign = -direction if heading_in else direction
@@ -221,13 +240,14 @@ class Patrol:
         sweep count; each robot chooses which of its lines are in-legs (the pass
         length, up to two passes) by the staleness of the bins they sample."""
         assert self.clock is not None
-        g = ((round(self.clock) // 2) * GOLDEN) % 1.0
+        offset = (round(self.clock) * GOLDEN) % 1.0  # of the lines from lo, this sweep
+        g = offset if direction > 0 else (1.0 - offset) % 1.0  # from the end it starts at
         end = lo if direction > 0 else hi
         shortest = FIRST_PASS_MIN * step
         best, best_score = None, -1
         for m in range(4):
             line = end + direction * (g + m) * step
-            length = (line - self.line_x) * direction
+            length = (line - self.grid_x) * direction
             if length < shortest:
                 continue
             if length > (FIRST_PASS_MIN + FIRST_PASS_SPAN) * step:
@@ -248,10 +268,36 @@ class Patrol:
         best, best_score = FIRST_PASS_MIN + FIRST_PASS_SPAN * golden, -1
         for j in range(FIRST_PASS_CANDIDATES):
             frac = FIRST_PASS_MIN + FIRST_PASS_SPAN * ((golden + j / FIRST_PASS_CANDIDATES) % 1)
-            line = self.line_x + direction * frac * step
+            line = self.grid_x + direction * frac * step
             score = self._in_leg_staleness(line, lo, hi, step, heading_in, direction)
             if score > best_score:
                 best, best_score = frac, score
+        return best
+
+    def _aim(self, line: float, lo: float, hi: float) -> float:
+        """Where the leg of grid line ``line`` runs: on it, unless the middle of a
+        column with no depth measured (``DepthMap.known``) lies within ``aim_fraction``
+        of a pass of it and inside the segment, and the line is not in such a middle
+        already; then on the nearest such middle. Never more than ``cover_m`` from the
+        last leg (the arc from it begins now), nor so far back that the next line of the
+        grid would be."""
+        c, depth_map = self.config, self.depth_map
+        step = self.spacing(lo, hi)
+        reach = c.aim_fraction * step
+        ahead = line + self.direction * (step - c.cover_m)  # the next line's cover
+        behind_prev = (self.arc_from_x - c.cover_m, self.arc_from_x + c.cover_m)
+        inside_lo = max(lo + c.end_inset_m, line - reach, behind_prev[0],
+                        ahead if self.direction > 0 else -math.inf)
+        inside_hi = min(hi - c.end_inset_m, line + reach, behind_prev[1],
+                        ahead if self.direction < 0 else math.inf)
+        if not depth_map.known(depth_map.bin_of(line)) and depth_map.staleness(line) > 0:
+            return line  # already in a new column's middle
+        best = line
+        for b in range(depth_map.bin_of(inside_lo), depth_map.bin_of(inside_hi) + 1):
+            centre = depth_map.centre(b)
+            if (not depth_map.known(b) and inside_lo <= centre <= inside_hi
+                    and (best == line or abs(centre - line) < abs(best - line))):
+                best = centre
         return best
 
     def _turn_depth(self, lo: float, hi: float, depth: float) -> float:

@@ -110,7 +110,7 @@ def test_sweep_reverses_inside_the_segment_and_reaches_its_end():
     lines = []
     for _ in range(12):
         patrol._start_turn(1.0, 3.0, heading_in=True)
-        lines.append(patrol.line_x)
+        lines.append(patrol.grid_x)
     assert all(1.0 <= x <= 3.0 for x in lines)
     assert max(lines) == pytest.approx(3.0 - PatrolConfig().end_inset_m)
     assert patrol.sweeps >= 2
@@ -353,7 +353,7 @@ def test_every_robot_puts_its_pass_lines_on_the_same_grid_of_phases():
         patrol.clock = 7.03  # the sweep that begins at hi, going down
         patrol._start_turn(lo, hi, heading_in=True)
         assert patrol.direction == -1 and patrol.sweeps == 1
-        line, step = patrol.line_x, patrol.spacing(lo, hi)
+        line, step = patrol.grid_x, patrol.spacing(lo, hi)
         phases = [position_to_phase(line - j * step, lo, hi, -1) for j in range(5)]
         levels.append([(p - math.pi) / (math.pi / cfg.passes_per_sweep) % 1.0 for p in phases])
     for a, b in itertools.combinations(levels, 2):
@@ -363,8 +363,46 @@ def test_every_robot_puts_its_pass_lines_on_the_same_grid_of_phases():
     patrol = Patrol(cfg, DepthMap(0.0, 0.1, cfg.min_depth_m), x=6.0 - cfg.end_inset_m)
     patrol.clock = 9.0
     patrol._start_turn(2.4, 6.0, heading_in=True)
-    offset = (6.0 - patrol.line_x) / patrol.spacing(2.4, 6.0) % 1.0
+    offset = (6.0 - patrol.grid_x) / patrol.spacing(2.4, 6.0) % 1.0
     assert offset != pytest.approx(levels[2][0], abs=0.05)
+
+
+def test_a_line_is_aimed_at_the_nearest_new_column_within_reach_and_never_off_the_segment():
+    """A pass line moves onto the middle of a column with no depth yet when one lies
+    within aim_fraction of a pass, stays put on a new column's middle or with none in
+    reach, never leaves legs further apart than cover_m, and the grid it is planned on
+    does not move."""
+    cfg = PatrolConfig(aim_fraction=0.25)
+    dm = DepthMap(0.0, 0.1, cfg.min_depth_m)
+    for b in range(30):
+        if b not in (12, 13, 29):
+            dm.record(0.1 * b + 0.05, 0.5)
+    patrol = Patrol(cfg, dm, x=1.0)
+
+    def aim(line: float, hi: float = 3.0, last: float | None = None) -> float:
+        patrol.arc_from_x = line - patrol.spacing(0.0, hi) if last is None else last
+        return patrol._aim(line, 0.0, hi)
+
+    reach = 0.25 * patrol.spacing(0.0, 3.0)  # 0.25 * 0.1875 m
+    assert aim(1.23) == 1.23  # within column 12's middle: stays
+    assert aim(1.21) == pytest.approx(1.25)  # column 12, 0.04 away
+    assert aim(1.39) == pytest.approx(1.35)  # 13 is nearer than 12
+    assert aim(1.25 - reach - 0.001) == 1.25 - reach - 0.001  # too far
+    assert aim(0.5) == 0.5  # nothing new near it
+    assert aim(2.91, hi=2.98) == 2.91  # column 29's middle is past the end inset
+    assert aim(2.91, hi=3.1) == pytest.approx(2.95)  # inside a longer segment
+    assert aim(1.21, last=1.21 - cfg.cover_m) == 1.21  # 1.25 is too far from the last leg
+    patrol.direction, patrol.arc_from_x = -1, 1.4  # going down: the next line is 1.0225
+    assert patrol._aim(1.21, 0.0, 3.0) == pytest.approx(1.25)
+    patrol.config = PatrolConfig(aim_fraction=0.25, max_spacing_m=0.2, cover_m=0.22)
+    assert patrol._aim(1.21, 0.0, 3.0) == 1.21  # 1.25 would leave it 0.2275 off
+    patrol.config, patrol.direction = cfg, 1
+    dm.learn(((12, 0.7),))  # a neighbour's depth counts as known
+    assert aim(1.21) == 1.21
+    patrol.clock, patrol.grid_x, patrol.line_x, patrol.direction = 4.0, 1.3, 1.35, 1
+    patrol._start_turn(0.0, 3.0, heading_in=True)  # from the grid, not the aimed line
+    assert patrol.grid_x == pytest.approx(1.3 + patrol.spacing(0.0, 3.0))
+    assert patrol.arc_from_grid == 1.3 and patrol.arc_from_x == 1.35
 
 
 def test_a_robot_counts_sweeps_with_its_lower_neighbour():
@@ -437,6 +475,7 @@ def test_the_arc_that_begins_a_sweep_steps_at_the_middle_of_its_step():
     p = ctrl.patrol
     p.motion, p.arc_from_x, p.direction, p.line_x, p.turned = (
         Motion.TURN_OUT, 1.95, -1, 1.75, 0.0)
+    p.arc_from_grid, p.grid_x = p.arc_from_x, p.line_x
     start = position_to_phase(1.95, 0.0, 2.0, -1)  # pi + 0.0785, not 3.06 going up
     middle = start + 0.5 * (position_to_phase(1.75, 0.0, 2.0, -1) - start)
     rate = 2 * math.pi / ctrl.cycle_s
