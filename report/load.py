@@ -116,12 +116,34 @@ def _columns(rows: list[tuple[float, ...]], names: tuple[str, ...]) -> dict[str,
     return {name: arr[:, j].copy() for j, name in enumerate(names)}
 
 
-def _last_of_each_time(cols: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """Of rows sorted by time, the last one of each time: a state sent again for the same
-    tick replaces the earlier one (a forgery sent ahead of its tick comes first)."""
+def _one_of_each_time(cols: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Of one robot's states sorted by time, one of each time. A second state of the
+    same tick is a forgery or a fault (an agent sends one a tick), and which one the
+    recorder heard first depends on timing (a forgery sent ahead of its tick comes
+    first, but a lagging recorder may hear the true one first), so the one kept is the
+    one whose boundaries lie nearest those of the robot's nearest single states before
+    and after it; the last one where there are none."""
     t = cols["t"]
-    keep = np.ones(t.size, dtype=bool)
-    keep[:-1] = t[1:] != t[:-1]
+    if t.size < 2 or not (t[1:] == t[:-1]).any():
+        return cols
+    starts = np.flatnonzero(np.concatenate([[True], t[1:] != t[:-1]]))
+    ends = np.append(starts[1:], t.size)
+    single = ends - starts == 1
+    lo, hi = cols["lo"], cols["hi"]
+    keep = []
+    for g, (a, z) in enumerate(zip(starts, ends, strict=True)):
+        if z - a == 1:
+            keep.append(a)
+            continue
+        before = np.flatnonzero(single[:g])
+        after = np.flatnonzero(single[g + 1:])
+        near = ([starts[before[-1]]] if before.size else []) + (
+            [starts[g + 1 + after[0]]] if after.size else [])
+        if not near:
+            keep.append(z - 1)
+            continue
+        off = [sum(abs(lo[r] - lo[n]) + abs(hi[r] - hi[n]) for n in near) for r in range(a, z)]
+        keep.append(a + int(np.argmin(off)))
     return {name: arr[keep] for name, arr in cols.items()}
 
 
@@ -256,7 +278,7 @@ def load_run(path: str | Path) -> RunData:
         tick_live=[live[i] for i in order],
         faults=sorted(faults, key=lambda f: (f["t"], f["log_ns"])),
         truth={r: Truth(**_columns(rows, TRUTH_FIELDS)) for r, rows in truth.items()},
-        states={r: States(**_last_of_each_time(_columns(rows, STATE_FIELDS)))
+        states={r: States(**_one_of_each_time(_columns(rows, STATE_FIELDS)))
                 for r, rows in states.items()},
         invalid=invalid,
         alive={r: sorted(ev) for r, ev in alive.items()},

@@ -87,14 +87,19 @@ def test_the_run_is_recorded_whole_and_the_lies_are_counted(runs):
 def test_the_team_does_as_well_as_without_the_lies(runs):
     clean, out, *_ = runs
     a, b = compute_summary(load_run(clean)), compute_summary(load_run(out))
+    # within 10 % of the clean run's, or of what the measure cannot tell from nothing: a
+    # boundary one tick behind its neighbour's for a tick is a gap of a few 1e-5 m s (a
+    # loaded machine gave 1.6e-5 against the clean run's 0)
+    floor = {"coverage_gap_m_s": 1e-3}
     for key in ("phase_sse_rad", "phase_path_sse_rad", "workload_sse_m2", "workload_rel_sse",
                 "workload_sse_agents_m2", "coverage_gap_m_s"):
         if a[key] is None:  # not measured on so short a run: nor with the lies
             assert b[key] is None, key
         else:
-            assert b[key] <= 1.1 * a[key] + 1e-9, (key, a[key], b[key])
-    # the lockstep was not slowed to a tick a second by the stray token
-    assert b["speedup"] > 5.0
+            assert b[key] <= 1.1 * a[key] + floor.get(key, 1e-9), (key, a[key], b[key])
+    # the lockstep was not slowed to a tick a second by the stray token (0.1x real time;
+    # a loaded machine runs this team at 5-70x)
+    assert b["speedup"] > 1.0
     # nobody's segment was pushed: the boundaries the agents published are the clean run's,
     # to the last bit when neither run's world had to go on without a command (a loaded
     # machine can make it wait past --cmd-timeout, and then the runs differ by timing, so

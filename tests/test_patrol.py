@@ -227,9 +227,9 @@ def test_depth_map_staleness_prefers_unsampled_bins_and_ignores_bin_sides():
 
 
 def test_random_profile_every_column_of_each_segment_gets_measured():
-    """Sweeps place their in-legs on the stalest columns: after 900 s every bin of each
+    """Sweeps place their in-legs on the stalest columns: after 500 s every bin of each
     robot's segment that lies wholly inside it holds a measurement within 5 cm."""
-    *_, ctrls = closed_loop("random-algae", "in-phase", 900.0)
+    *_, ctrls = closed_loop("random-algae", "in-phase", 500.0)
     depth = load_map("random-algae", 0.05, 1).patrol_depth_bins(0.1)
     for c in ctrls:
         dm = c.depth_map

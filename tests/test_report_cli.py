@@ -251,3 +251,28 @@ def test_map_draws_the_local_edge_and_the_patrol_depth_above_it(tmp_path: Path) 
     run.info["edge_y"] = []
     _, flat, _ = edge_outline(run)
     assert flat.size == 60 and not flat.any()
+
+
+def test_of_two_states_of_one_tick_the_one_that_follows_the_robot_is_kept():
+    """A forged state of robot 1's tick that the recorder heard after the true one (a
+    lagging recorder) is not the one measured: whatever the order, the state whose
+    boundaries continue those of the ticks around it is kept."""
+    from report.load import _one_of_each_time
+
+    true = (1.5, 0.546, 3.276)
+    forged = (1.5, 0.0, 5.9)
+    for order in ((true, forged), (forged, true)):
+        rows = [(1.4, 0.545, 3.277), *order, (1.6, 0.547, 3.275)]
+        cols = {name: np.array([r[j] for r in rows]) for j, name in enumerate(("t", "lo", "hi"))}
+        kept = _one_of_each_time(cols)
+        assert kept["t"].tolist() == [1.4, 1.5, 1.6]
+        assert kept["lo"][1] == 0.546 and kept["hi"][1] == 3.276
+    # forged states of three ticks in a row: each is judged by the true ones around them
+    rows = [(1.4, 0.545, 3.277)]
+    for t in (1.5, 1.6, 1.7):
+        rows += [(t, 0.0, 5.9), (t, 0.546, 3.276)] if t != 1.6 else [(t, 0.546, 3.276),
+                                                                     (t, 0.0, 5.9)]
+    rows.append((1.8, 0.547, 3.275))
+    cols = {name: np.array([r[j] for r in rows]) for j, name in enumerate(("t", "lo", "hi"))}
+    kept = _one_of_each_time(cols)
+    assert kept["lo"].tolist() == [0.545, 0.546, 0.546, 0.546, 0.547]
