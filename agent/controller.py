@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 from agent.depthmap import DepthMap
 from agent.partition import SegmentView, shared_boundary
-from agent.patrol import Motion, Patrol, PatrolConfig, Steer
+from agent.patrol import Motion, Patrol, PatrolConfig, Steer, TeamInput
 from agent.phase import (
     TWO_PI,
     arc_may_begin,
@@ -151,6 +151,11 @@ class Controller:
         self.rate = TeamRate()  # the cycle, when this robot is the chain's root
         self.passes: int | None = None  # the team's passes per sweep, when known
         self.cycle_s = self.gains.cycle_s
+        # What the patrol is told (agent.patrol.TeamInput): the sweep clock (turns / pi)
+        # as of the last tick, and whether the robot is well behind its desired phase,
+        # so measures nothing slowly.
+        self.clock: float | None = None
+        self.hurry = False
 
     def _agree(self, dt: float, lower: Neighbour | None, upper: Neighbour | None,
                has_lower: bool, has_upper: bool) -> tuple[float, int, tuple[float, ...]]:
@@ -230,13 +235,14 @@ class Controller:
         self._update_boundaries(lower, upper, has_lower, has_upper)
         before = self.phase_des
         if before is not None and self.published is not None:
-            lag = wrap_pi(before - position_to_phase(x, self.lo, self.hi, self.patrol.direction))
-            self.patrol.hurry = lag > HURRY_RAD
+            lag = wrap_pi(before - position_to_phase(x, self.lo, self.hi,
+                                                     self.patrol.view.direction))
+            self.hurry = lag > HURRY_RAD
         self.cycle_s, self.passes, chain = self._agree(dt, lower, upper, has_lower, has_upper)
-        self.patrol.team_passes = self.passes
         rate = TWO_PI / self.cycle_s
-        steer = self.patrol.step(x, y, theta, ice, algae, self.lo, self.hi)
-        direction = self.patrol.direction
+        steer = self.patrol.step(x, y, theta, ice, algae, self.lo, self.hi,
+                                 TeamInput(self.clock, self.passes, self.hurry))
+        direction = self.patrol.view.direction
         phase = position_to_phase(x, self.lo, self.hi, direction)
         if self.phase_des is None:
             self.phase_des = phase
@@ -281,22 +287,23 @@ class Controller:
         paced to end when the next arc is due, each arc begun so that its middle falls
         on the middle of its step of the team's phase."""
         assert self.phase_des is not None
-        p, lim = self.patrol, self.limits
+        p, view, lim = self.patrol, self.patrol.view, self.limits
         lead = 0.5 * rate * p.arc_time_s(self.lo, self.hi, lim.v_max, lim.wheel_base_m)
         if steer.motion in (Motion.ENTER, Motion.UNDER, Motion.EXIT):
             if wrap_pi(self.phase_des - phase) < -AHEAD_WAIT_RAD:
                 return 0.0  # well ahead of the team (one started ahead): let it come
-            level = position_to_phase(p.grid_x, self.lo, self.hi, p.direction)
-            middle = level + 0.5 * math.pi / p.passes
+            level = position_to_phase(view.grid_x, self.lo, self.hi, view.direction)
+            middle = level + 0.5 * math.pi / view.passes
             time_left = wrap_pi(middle - lead - self.phase_des) / rate
-            fast, slow = p.to_go(y, self.lo, self.hi)
+            fast, slow = p.to_go(y, self.lo, self.hi, self.hurry)
             return leg_speed(time_left, fast, slow, steer.measuring, lim.v_max,
                              p.config.measure_speed, p.config.min_leg_speed)
-        if p.turned > 0.05:
+        if view.turned > p.config.arc_begun_rad:
             return self._arc_speed(steer, dt)
-        if p.hurry or arc_may_begin(
-                self.phase_des, position_to_phase(p.arc_from_grid, self.lo, self.hi, p.direction),
-                position_to_phase(p.grid_x, self.lo, self.hi, p.direction), lead):
+        if self.hurry or arc_may_begin(
+                self.phase_des,
+                position_to_phase(view.arc_from_grid, self.lo, self.hi, view.direction),
+                position_to_phase(view.grid_x, self.lo, self.hi, view.direction), lead):
             return lim.v_max
         return 0.0
 
@@ -312,7 +319,7 @@ class Controller:
             self.turns = self.phase_des
         else:
             self.turns += wrap_pi(self.phase_des - before)
-        self.patrol.clock = self.turns / math.pi
+        self.clock = self.turns / math.pi
 
 
 def initial_segment(robot: int, team: int, edge_lo: float, edge_hi: float) -> tuple[float, float]:

@@ -14,6 +14,11 @@ would leave the segment. Every robot makes the same number of passes per sweep
 (the pass spacing scales with its segment), and the pass lines of every robot sit on
 one grid of phases, set by the team's sweep count: so robots with equal work step
 their phases together, level with each other.
+
+The transitions are data (``TRANSITIONS``, each with its guard); what a leg has seen
+lives in its own record (``InLeg``, ``OutLeg``), as an arc's turning does (``Arc``),
+each new on entry. The controller tells the patrol the team's clock, passes and
+hurry (``TeamInput``) and reads it through ``Patrol.view``.
 """
 
 from __future__ import annotations
@@ -38,6 +43,36 @@ class Motion(Enum):
     TURN_UNDER = 3
     EXIT = 4
     TURN_OUT = 5
+
+
+ARCS = (Motion.TURN_UNDER, Motion.TURN_OUT)
+IN_LEG = (Motion.ENTER, Motion.UNDER)
+
+
+@dataclass(frozen=True)
+class Transition:
+    """One way from a motion to the next: ``when`` names the guard, a method of
+    ``Patrol`` that the source motion's ``_decide_*`` asks. ``same_tick``: the target
+    decides on this tick's sensing too (a leg that reaches its turn begins the arc at
+    once); otherwise it acts from the next tick on, only steering on this one."""
+
+    source: Motion
+    target: Motion
+    when: str
+    same_tick: bool
+
+
+TRANSITIONS: tuple[Transition, ...] = (
+    Transition(Motion.ENTER, Motion.UNDER, "_sees_the_ice", same_tick=True),
+    Transition(Motion.ENTER, Motion.TURN_UNDER, "_searched_too_far", same_tick=True),
+    Transition(Motion.UNDER, Motion.TURN_UNDER, "_deep_enough", same_tick=True),
+    Transition(Motion.TURN_UNDER, Motion.EXIT, "_arc_done", same_tick=False),
+    Transition(Motion.EXIT, Motion.TURN_OUT, "_out_far_enough", same_tick=True),
+    Transition(Motion.TURN_OUT, Motion.ENTER, "_arc_done", same_tick=False),
+)
+SUCCESSORS: dict[Motion, frozenset[Motion]] = {
+    m: frozenset(t.target for t in TRANSITIONS if t.source is m) for m in Motion}
+_BY_PAIR = {(t.source, t.target): t for t in TRANSITIONS}
 
 
 @dataclass(frozen=True)
@@ -75,6 +110,21 @@ class PatrolConfig:
     # Legs never further apart than this, aimed or not: a point of the edge between two
     # is then within a robot's radius (0.17 m) of one of them, seen every sweep.
     cover_m: float = 0.34
+    # An arc that has turned a quarter ends once its heading is within this of the
+    # leg's (or past it), rad: at 10 Hz a tight arc turns a third of a radian a tick.
+    arc_end_rad: float = 0.03
+    # An arc ends regardless after this much rotation, rad: one that began far off the
+    # leg's heading (a robot pushed round) never meets it within a half turn.
+    max_arc_rad: float = math.pi + 0.5
+    # A leg keeps measuring slowly this far past the edge where the map has it, m: the
+    # edge or the algae's end may have moved since.
+    past_edge_m: float = 0.1
+    # A short last pass of a sweep is made if at least this fraction of a pass is left
+    # before the end inset; less, and the sweep reverses at once.
+    min_last_pass: float = 0.25
+    # An arc that has turned this much (rad) goes on at arc speed; before that the
+    # controller holds it until the team's phase lets it begin.
+    arc_begun_rad: float = 0.05
 
     def __post_init__(self) -> None:
         if self.passes_per_sweep < 1:
@@ -95,6 +145,11 @@ class PatrolConfig:
             raise ValueError("aim_fraction must be in [0, 0.5] (of a pass)")
         if self.cover_m < self.max_spacing_m:
             raise ValueError("cover_m must be at least max_spacing_m")
+        if not (0 < self.arc_end_rad and HALF_PI < self.max_arc_rad):
+            raise ValueError("arc_end_rad must be positive and max_arc_rad past a quarter")
+        if self.past_edge_m < 0 or not 0 < self.min_last_pass <= 1 or self.arc_begun_rad < 0:
+            raise ValueError("past_edge_m and arc_begun_rad must be >= 0, "
+                             "min_last_pass in (0, 1]")
 
 
 @dataclass(frozen=True)
@@ -106,9 +161,87 @@ class Steer:
     measuring: bool = False  # near an edge this leg measures: go slow
 
 
+@dataclass(frozen=True)
+class TeamInput:
+    """What the controller tells the patrol at each tick, from the team."""
+
+    # The team's sweep clock (the unwrapped desired phase over pi) as of the last
+    # tick; None before the first. The first pass of a sweep is put on its grid.
+    clock: float | None = None
+    # The team's passes per sweep, taken at the start of each sweep (so a sweep's
+    # lines all lie on one grid); None: the configured ``passes_per_sweep``.
+    passes: int | None = None
+    # The robot is well behind the team: measure nothing slowly (its samples and
+    # crossings are ROUGH).
+    hurry: bool = False
+
+
+@dataclass(frozen=True)
+class PatrolView:
+    """What the controller reads of the patrol to pace it."""
+
+    motion: Motion
+    direction: int  # along the edge, +1 towards hi
+    grid_x: float  # the pass line on the team's grid the robot is on or arcs to
+    arc_from_grid: float  # the grid line the last arc left
+    passes: int  # passes in this sweep
+    turned: float  # rotation so far in the current (or last) arc, rad
+
+
+@dataclass
+class InLeg:
+    """What one way in (ENTER, then UNDER) has seen; a new one on entry to ENTER."""
+
+    start_y: float | None = None  # where it began, set on its first tick
+    from_water: bool = False  # it has seen water: it will cross the edge
+    entry_y: float | None = None  # where it saw the ice edge
+    measures: bool = True  # it crossed the edge, so can measure the depth
+    algae_depth: float | None = None  # its deepest point with algae seen, from entry_y
+    turn_depth: float | None = None  # set once it has measured: turn there
+
+
+@dataclass
+class OutLeg:
+    """What one way out (EXIT) has seen; a new one on entry to EXIT."""
+
+    start_y: float | None = None  # where it began, set on its first tick
+    exit_y: float | None = None  # where it left the ice
+    algae_top: float | None = None  # where it first saw algae
+    algae_x: float | None = None  # and at which x
+    started_in_algae: bool | None = None  # whether it saw algae on its first tick
+
+
+@dataclass
+class Arc:
+    """One 180 degree arc between passes; a new one as each arc begins."""
+
+    sign: int  # +1 left (counter-clockwise), -1 right
+    radius: float
+    turned: float = 0.0  # rotation so far, rad
+
+
+NO_TEAM = TeamInput()
+
+
+@dataclass(frozen=True)
+class Tick:
+    """One tick's inputs to ``Patrol.step``, with what follows from the last tick."""
+
+    x: float
+    y: float
+    theta: float
+    ice: bool
+    algae: bool
+    prev_y: float | None  # the last tick's y
+    rotation: float  # heading change since the last tick, rad
+    lo: float
+    hi: float
+    team: TeamInput
+
+
 class Patrol:
-    """The lawnmower state machine. Pure: feed it pose and sensing each tick, and the
-    team's sweep clock (``clock``: the unwrapped desired phase over pi) when known."""
+    """The lawnmower state machine (``TRANSITIONS``). Pure: feed it pose and sensing
+    each tick, with what the team says (``TeamInput``); read ``view``."""
 
     def __init__(self, config: PatrolConfig, depth_map: DepthMap, x: float, direction: int = 1):
         self.config = config
@@ -122,45 +255,35 @@ class Patrol:
         self.grid_x = x
         self.arc_from_grid = x
         self.x = x  # where the robot is
-        self.clock: float | None = None  # the team's sweep clock, set by the controller
-        self.entry_y: float | None = None  # where the ice edge was seen on the way in
-        self.leg_y: float | None = None  # where the current straight leg began
+        self.in_leg = InLeg()
+        self.out_leg = OutLeg()
+        self.arc = Arc(0, config.max_turn_radius_m)
         # Set while passes find no edge (nothing to measure): where the first of them
         # began, which each way out returns to.
         self.return_y: float | None = None
-        self.exit_y: float | None = None  # where it was left on the way out
-        self.turn_depth: float | None = None  # set once an in-leg has measured: turn there
-        self.turn_sign = 0  # +1 left (counter-clockwise), -1 right
-        self.turn_radius = config.max_turn_radius_m
         self.sweeps = 0  # reversals so far
-        # Passes per sweep: the team's number (``team_passes``, set by the controller
-        # from the chain's decision) taken at the start of each sweep, so a sweep's
-        # lines all lie on one grid.
-        self.passes = config.passes_per_sweep
-        self.team_passes = config.passes_per_sweep
+        self.passes = config.passes_per_sweep  # this sweep's, from TeamInput.passes
         self._deepest: tuple[tuple[int, int, int] | None, float] = (None, 0.0)  # a cache
-        self.turned = 0.0  # rotation so far in the current arc, rad
         self.prev_theta: float | None = None
-        self.last_depth: float | None = None
         self.prev_y: float | None = None
-        self.algae_depth: float | None = None  # deepest point of this leg with algae seen
-        self.out_algae_top: float | None = None  # where the out leg first saw algae
-        self.out_algae_x: float | None = None  # and at which x
-        self.out_started_in_algae: bool | None = None
+        self.last_depth: float | None = None  # the depth the last in-leg measured
         self.was_measuring = False  # whether the last tick went slowly to measure
-        # Set by the controller while the robot is well behind the team: it then
-        # measures nothing slowly (its samples and crossings are ROUGH).
-        self.hurry = False
-        self.from_water = False  # this way in has seen water: it will cross the edge
-        self.measures = True  # this in-leg crossed the edge, so can measure the depth
-        self.out_slow = False  # whether the out leg came upon the algae slowly
+        # Whether the last out leg that saw algae came upon it slowly: an out leg that
+        # sees none records its sample with the kind this says.
+        self.out_slow = False
+
+    @property
+    def view(self) -> PatrolView:
+        return PatrolView(self.motion, self.direction, self.grid_x, self.arc_from_grid,
+                          self.passes, self.arc.turned)
 
     def spacing(self, lo: float, hi: float) -> float:
         """The distance between passes: the segment over the team's passes per sweep,
         unclamped, so every robot's phase steps by pi / passes at every arc."""
         return (hi - lo) / self.passes
 
-    def _plan(self, lo: float, hi: float, heading_in: bool) -> tuple[float, int, bool]:
+    def _plan(self, lo: float, hi: float, heading_in: bool,
+              clock: float | None) -> tuple[float, int, bool]:
         """The next pass line, the direction along the edge to it, and whether it
         begins a new sweep. Changes nothing."""
         c = self.config
@@ -182,38 +305,38 @@ class Patrol:
         # robot wobbling off the ice's side would see 'no ice' under the ice
         end = hi - c.end_inset_m if direction > 0 else lo + c.end_inset_m
         room = max(0.0, (end - self.grid_x) * direction)
-        if room >= 0.25 * step:
+        if room >= c.min_last_pass * step:
             return self.grid_x + direction * room, direction, False  # a short last pass
         direction = -direction
-        length = self._first_pass(lo, hi, step, heading_in, direction)
+        length = self._first_pass(lo, hi, step, heading_in, direction, clock)
         line = self.grid_x + direction * length
         if not lo <= line <= hi:  # narrower than a pass: head for the middle
             direction = 1 if self.grid_x < 0.5 * (lo + hi) else -1
             line = self.grid_x + direction * length
         return line, direction, True
 
-    def _start_turn(self, lo: float, hi: float, heading_in: bool) -> None:
+    def _start_turn(self, lo: float, hi: float, heading_in: bool,
+                    team: TeamInput = NO_TEAM) -> None:
         """Choose the next pass line, then the arc from where the robot is onto it."""
-        line, direction, new_sweep = self._plan(lo, hi, heading_in)
+        line, direction, new_sweep = self._plan(lo, hi, heading_in, team.clock)
         self.arc_from_x, self.arc_from_grid = self.line_x, self.grid_x
         self.sweeps += new_sweep
         if new_sweep:
-            self.passes = self.team_passes
+            self.passes = self.config.passes_per_sweep if team.passes is None else team.passes
         self.direction = direction
         self.grid_x = line
         self.line_x = self._aim(line, lo, hi)
-        self.turn_radius = self._arc_radius(abs(line - self.x))
         # Heading +y, going +x is a right (clockwise) turn; heading -y it is a left one.
-        self.turn_sign = -direction if heading_in else direction
-        self.turned = 0.0
+        self.arc = Arc(-direction if heading_in else direction,
+                       self._arc_radius(abs(line - self.x)))
 
     def _first_pass(self, lo: float, hi: float, step: float, heading_in: bool,
-                    direction: int) -> float:
+                    direction: int, clock: float | None) -> float:
         """The length of the first pass of a new sweep: onto the team's grid, unless a
         bin of the profile that matters has not been measured, when its line is
         chosen to reach the stalest bins instead."""
-        if self.clock is not None and not self.depth_map.gap(lo, hi):
-            on_grid = self._grid_first_pass(lo, hi, step, heading_in, direction)
+        if clock is not None and not self.depth_map.gap(lo, hi):
+            on_grid = self._grid_first_pass(lo, hi, step, heading_in, direction, clock)
             if on_grid is not None:
                 return on_grid
         return step * self._first_pass_fraction(lo, hi, step, heading_in, direction)
@@ -232,15 +355,14 @@ class Patrol:
         return score
 
     def _grid_first_pass(self, lo: float, hi: float, step: float, heading_in: bool,
-                         direction: int) -> float | None:
+                         direction: int, clock: float) -> float | None:
         """The first pass onto the team's grid: the sweep's lines at (g + j) passes from
         the end it starts at, so every robot's phase takes the same levels (eq. 3.1
         scales each segment to pi). g walks the golden ratio from sweep to sweep of the
         same direction, and is the same for every robot, as it comes from the team's
         sweep count; each robot chooses which of its lines are in-legs (the pass
         length, up to two passes) by the staleness of the bins they sample."""
-        assert self.clock is not None
-        offset = (round(self.clock) * GOLDEN) % 1.0  # of the lines from lo, this sweep
+        offset = (round(clock) * GOLDEN) % 1.0  # of the lines from lo, this sweep
         g = offset if direction > 0 else (1.0 - offset) % 1.0  # from the end it starts at
         end = lo if direction > 0 else hi
         shortest = FIRST_PASS_MIN * step
@@ -300,14 +422,14 @@ class Patrol:
                 best = centre
         return best
 
-    def _turn_depth(self, lo: float, hi: float, depth: float) -> float:
+    def _turn_depth(self, lo: float, hi: float, depth: float, clock: float | None) -> float:
         """How deep an in-leg that has measured its column goes on before it turns:
         ``turn_margin_m`` past the algae its map expects under the next pass line (the
         deepest it knows in the segment if that column is new), so the out-leg there
         starts below the algae and measures it too."""
         c = self.config
         dm = self.depth_map
-        line, _, _ = self._plan(lo, hi, heading_in=True)
+        line, _, _ = self._plan(lo, hi, True, clock)
         expected = dm.depths.get(dm.bin_of(line))
         if expected is None:
             inside = [d for b, d in dm.depths.items() if dm.bin_of(lo) <= b <= dm.bin_of(hi)]
@@ -336,11 +458,12 @@ class Patrol:
             self._deepest = (key, max(values, default=self.config.min_depth_m))
         return self._deepest[1]
 
-    def to_go(self, y: float, lo: float, hi: float) -> tuple[float, float]:
+    def to_go(self, y: float, lo: float, hi: float, hurry: bool = False) -> tuple[float, float]:
         """What is left of this straight leg as the map expects it: (metres at full
         speed, metres at the measuring speed), the latter the parts of the zones of
-        ``_measuring`` still ahead. (0, 0) in an arc."""
-        c = self.config
+        ``_measuring`` still ahead (none when ``hurry``, as at this tick's step). (0, 0)
+        in an arc."""
+        c, leg, out = self.config, self.in_leg, self.out_leg
         dm = self.depth_map
         edge = dm.edge_y(self.x)
         known = dm.depths.get(dm.bin_of(self.x))
@@ -355,28 +478,28 @@ class Patrol:
             if edge is not None:
                 zones.append((edge - c.edge_zone_m, edge))  # ENTER ends at the edge
         elif self.motion is Motion.UNDER:
-            base = self.entry_y if self.entry_y is not None else y
-            end = base + (self.turn_depth if self.turn_depth is not None else turn)
+            base = leg.entry_y if leg.entry_y is not None else y
+            end = base + (leg.turn_depth if leg.turn_depth is not None else turn)
         elif self.motion is Motion.EXIT:
-            out_edge = self.exit_y if self.exit_y is not None else (
-                edge if edge is not None else self.entry_y)
+            out_edge = out.exit_y if out.exit_y is not None else (
+                edge if edge is not None else leg.entry_y)
             if out_edge is None:
                 return 0.0, 0.0
             end = out_edge - c.margin_out_m
-            if (not self.hurry and self.out_algae_top is None
-                    and self.out_started_in_algae is not True and edge is not None
+            if (not hurry and out.algae_top is None
+                    and out.started_in_algae is not True and edge is not None
                     and known is not None):
                 zones.append((edge + known, edge + known + c.edge_zone_m))
         else:
             return 0.0, 0.0
-        if self.motion in (Motion.ENTER, Motion.UNDER) and self.turn_depth is None:
+        if self.motion in IN_LEG and leg.turn_depth is None:
             if known is None:  # a new column: all its depth slowly
                 zones.append((base, base + turn))
             else:
                 zones.append((base + known - c.measure_zone_m, base + known))
         a, z = min(y, end), max(y, end)
-        slow = 0.0 if self.hurry else sum(max(0.0, min(z, top) - max(a, bottom))
-                                          for bottom, top in zones)
+        slow = 0.0 if hurry else sum(max(0.0, min(z, top) - max(a, bottom))
+                                     for bottom, top in zones)
         slow = min(slow, z - a)
         return z - a - slow, slow
 
@@ -410,12 +533,12 @@ class Patrol:
     def rotation_left(self) -> float | None:
         """In an arc that has turned past a quarter, the rotation left to the leg's
         heading (rad; negative once past it); None otherwise."""
-        if self.motion not in (Motion.TURN_UNDER, Motion.TURN_OUT) or self.turned < HALF_PI:
+        if self.motion not in ARCS or self.arc.turned < HALF_PI:
             return None
         if self.prev_theta is None:
             return None
         heading = -HALF_PI if self.motion is Motion.TURN_UNDER else HALF_PI
-        return self.turn_sign * wrap_pi(heading - self.prev_theta)
+        return self.arc.sign * wrap_pi(heading - self.prev_theta)
 
     def _hold_line(self, x: float, theta: float, heading: float) -> float:
         c = self.config
@@ -433,19 +556,20 @@ class Patrol:
         the in-legs found); algae from the start only bounds it from below, and then
         nothing is recorded. A ROUGH sample if it came upon the algae at full speed
         (the map had no depth for the column), else a PRECISE one."""
+        out = self.out_leg
         mid = y if prev_y is None else 0.5 * (prev_y + y)
-        if self.out_started_in_algae is None:
-            self.out_started_in_algae = algae
-        if algae and self.out_algae_top is None:
+        if out.started_in_algae is None:
+            out.started_in_algae = algae
+        if algae and out.algae_top is None:
             self.out_slow = self.was_measuring
-            self.out_algae_top = mid
-            self.out_algae_x = x
-        if not ice and self.exit_y is None:
-            self.exit_y = mid
-            if not self.out_started_in_algae:
+            out.algae_top = mid
+            out.algae_x = x
+        if not ice and out.exit_y is None:
+            out.exit_y = mid
+            if not out.started_in_algae:
                 c = self.config
-                top = self.out_algae_top
-                at = x if self.out_algae_x is None else self.out_algae_x
+                top = out.algae_top
+                at = x if out.algae_x is None else out.algae_x
                 edge = self.depth_map.edge_y(at)
                 depth = c.min_depth_m if top is None else max(
                     c.min_depth_m, top - (mid if edge is None else edge))
@@ -457,133 +581,186 @@ class Patrol:
         """The patrol depth of this pass: the minimum if algae ended before it, else
         the middle of the last tick with algae and this first tick without, from the
         ice edge the in-legs found."""
-        c = self.config
+        c, leg = self.config, self.in_leg
         if depth >= c.max_depth_m:
             return depth
-        if self.algae_depth is None or self.algae_depth < c.min_depth_m or prev_y is None:
+        if leg.algae_depth is None or leg.algae_depth < c.min_depth_m or prev_y is None:
             return c.min_depth_m
-        measured = 0.5 * (self.algae_depth + depth)
-        assert self.entry_y is not None
+        measured = 0.5 * (leg.algae_depth + depth)
+        assert leg.entry_y is not None
         edge = self.depth_map.edge_y(self.x)
         if edge is not None:
-            measured += self.entry_y - edge
+            measured += leg.entry_y - edge
         return max(c.min_depth_m, measured)
 
     def _algae_top(self, depth: float, prev_y: float | None) -> float | None:
         """Where this in-leg saw the algae end (the y ``_measured_depth`` measures from
         the edge); None if its depth is not measured from the edge (the minimum, or
         the deepest the patrol goes) or no crossing is known here yet."""
-        c = self.config
-        if (depth >= c.max_depth_m or self.algae_depth is None or prev_y is None
-                or self.algae_depth < c.min_depth_m or self.entry_y is None
+        c, leg = self.config, self.in_leg
+        if (depth >= c.max_depth_m or leg.algae_depth is None or prev_y is None
+                or leg.algae_depth < c.min_depth_m or leg.entry_y is None
                 or self.depth_map.edge_y(self.x) is None):
             return None
-        return self.entry_y + 0.5 * (self.algae_depth + depth)
+        return leg.entry_y + 0.5 * (leg.algae_depth + depth)
 
     def step(self, x: float, y: float, theta: float, ice: bool, algae: bool,
-             lo: float, hi: float) -> Steer:
-        c = self.config
-        self.x = x
+             lo: float, hi: float, team: TeamInput = NO_TEAM) -> Steer:
+        """One tick: the motion decides on this tick's sensing and may take one of its
+        ``TRANSITIONS``; a ``same_tick`` one lets the next motion decide too. Then the
+        motion it ends in steers."""
         rotation = 0.0 if self.prev_theta is None else wrap_pi(theta - self.prev_theta)
+        self.x = x
         self.prev_theta = theta
-        prev_y, self.prev_y = self.prev_y, y
-        if self.motion in (Motion.ENTER, Motion.EXIT) and self.leg_y is None:
-            self.leg_y = y
-            self.from_water = False
-        if self.motion is Motion.ENTER and not ice:
-            self.from_water = True
-        if self.motion is Motion.ENTER:
-            if ice:
-                # The edge lies between this tick and the last one: take the middle.
-                self.entry_y = y if prev_y is None else 0.5 * (prev_y + y)
-                # A leg that began under the ice (an agent started where its robot
-                # stood) crossed no edge: it measures nothing.
-                self.measures = self.from_water
-                if self.measures:
-                    self.depth_map.cross(x, self.entry_y,
-                                         PRECISE if self.was_measuring else ROUGH)
-                self.algae_depth = None
-                self.return_y = None
-                self.motion = Motion.UNDER
-            elif self.leg_y is not None and y - self.leg_y >= c.max_search_m:
-                # No edge where this pose says it should be: back to where the leg
-                # began (EXIT ends margin_out_m past exit_y), then the next pass line.
-                if self.return_y is None:  # the first of a run of misses: no creeping in
-                    self.return_y = self.leg_y
-                self._start_turn(lo, hi, heading_in=True)
-                self.motion = Motion.TURN_UNDER
-        if self.motion is Motion.UNDER:
-            depth = y - (self.entry_y if self.entry_y is not None else y)
-            if self.turn_depth is None:
-                if algae:
-                    self.algae_depth = depth
-                if (depth >= c.min_depth_m and not algae) or depth >= c.max_depth_m:
-                    self.last_depth = self._measured_depth(depth, prev_y, y)
-                    if self.measures:
-                        self.depth_map.record(  # where it was measured
-                            x, self.last_depth, PRECISE if self.was_measuring else ROUGH,
-                            self._algae_top(depth, prev_y))
-                    self.turn_depth = self._turn_depth(lo, hi, depth)
-            if self.turn_depth is not None and (depth >= self.turn_depth
-                                                or depth >= c.max_depth_m):
-                self.turn_depth = None
-                self._start_turn(lo, hi, heading_in=True)
-                self.motion = Motion.TURN_UNDER
-        elif self.motion is Motion.EXIT:
-            if self.return_y is not None:  # this pass missed the edge
-                if self.exit_y is None:
-                    self.exit_y = self.return_y + c.margin_out_m
-            else:
-                self._measure_on_the_way_out(x, y, prev_y, ice, algae)
-            far = self.leg_y is not None and self.leg_y - y >= c.max_depth_m + c.max_search_m
-            if far and self.exit_y is None:  # the ice never ended: a sensor or the pose
-                self.exit_y = y + c.margin_out_m  # is wrong; turn back out here
-            if self.exit_y is not None and y <= self.exit_y - c.margin_out_m:
-                self._start_turn(lo, hi, heading_in=False)
-                self.motion = Motion.TURN_OUT
-        if self.motion in (Motion.TURN_UNDER, Motion.TURN_OUT):
-            self.turned += self.turn_sign * rotation
-            # The arc ends on the leg's heading (+-y), whatever heading it began with.
-            heading = -HALF_PI if self.motion is Motion.TURN_UNDER else HALF_PI
-            if ((self.turned >= HALF_PI and self.turn_sign * wrap_pi(heading - theta) <= 0.03)
-                    or self.turned >= math.pi + 0.5):
-                self.leg_y = None  # a straight leg begins
-                if self.motion is Motion.TURN_UNDER:
-                    self.motion = Motion.EXIT
-                    self.exit_y = None
-                    self.out_algae_top = None
-                    self.out_algae_x = None
-                    self.out_started_in_algae = None
-                else:
-                    self.motion = Motion.ENTER
-                    self.entry_y = None
-            else:
-                return Steer(self.turn_sign / self.turn_radius, self.motion)
-        heading = HALF_PI if self.motion in (Motion.ENTER, Motion.UNDER) else -HALF_PI
-        self.was_measuring = self._measuring(x, y)
-        return Steer(self._hold_line(x, theta, heading), self.motion, self.was_measuring)
+        tick = Tick(x, y, theta, ice, algae, self.prev_y, rotation, lo, hi, team)
+        self.prev_y = y
+        deciders = {Motion.ENTER: self._decide_enter, Motion.UNDER: self._decide_under,
+                    Motion.TURN_UNDER: self._decide_arc, Motion.EXIT: self._decide_exit,
+                    Motion.TURN_OUT: self._decide_arc}
+        while True:
+            target = deciders[self.motion](tick)
+            if target is None or not self._go(target, tick):
+                break
+        return self._steer(tick)
 
-    def _measuring(self, x: float, y: float) -> bool:
+    def _go(self, target: Motion, tick: Tick) -> bool:
+        """Take the declared transition to ``target``, giving the motion entered its own
+        fresh state (a leg's record, or the arc onto the next pass line). Returns
+        whether the target decides on this tick too."""
+        transition = _BY_PAIR.get((self.motion, target))
+        if transition is None:
+            raise ValueError(f"no transition {self.motion.name} -> {target.name} declared")
+        if target is Motion.ENTER:
+            self.in_leg = InLeg()
+        elif target is Motion.EXIT:
+            self.out_leg = OutLeg()
+        elif target in ARCS:
+            self._start_turn(tick.lo, tick.hi, target is Motion.TURN_UNDER, tick.team)
+        self.motion = target
+        return transition.same_tick
+
+    def _decide_enter(self, tick: Tick) -> Motion | None:
+        """On in until the ice edge: there the leg measures the edge (if it crossed
+        it) and goes UNDER; no edge within ``max_search_m``: turn."""
+        leg = self.in_leg
+        if leg.start_y is None:
+            leg.start_y = tick.y
+        if not tick.ice:
+            leg.from_water = True
+        if self._sees_the_ice(tick):
+            y, prev_y = tick.y, tick.prev_y
+            # The edge lies between this tick and the last one: take the middle.
+            leg.entry_y = y if prev_y is None else 0.5 * (prev_y + y)
+            # A leg that began under the ice (an agent started where its robot
+            # stood) crossed no edge: it measures nothing.
+            leg.measures = leg.from_water
+            if leg.measures:
+                self.depth_map.cross(tick.x, leg.entry_y,
+                                     PRECISE if self.was_measuring else ROUGH)
+            self.return_y = None
+            return Motion.UNDER
+        if self._searched_too_far(tick):
+            # No edge where this pose says it should be: back to where the leg
+            # began (EXIT ends margin_out_m past exit_y), then the next pass line.
+            if self.return_y is None:  # the first of a run of misses: no creeping in
+                self.return_y = leg.start_y
+            return Motion.TURN_UNDER
+        return None
+
+    def _sees_the_ice(self, tick: Tick) -> bool:
+        return tick.ice
+
+    def _searched_too_far(self, tick: Tick) -> bool:
+        start = self.in_leg.start_y
+        return start is not None and tick.y - start >= self.config.max_search_m
+
+    def _decide_under(self, tick: Tick) -> Motion | None:
+        """On under the ice while algae is seen (at least ``min_depth_m``): where it
+        ends, record the depth and choose the turn depth; turn there."""
+        c, leg = self.config, self.in_leg
+        depth = tick.y - (leg.entry_y if leg.entry_y is not None else tick.y)
+        if leg.turn_depth is None:
+            if tick.algae:
+                leg.algae_depth = depth
+            if (depth >= c.min_depth_m and not tick.algae) or depth >= c.max_depth_m:
+                self.last_depth = self._measured_depth(depth, tick.prev_y, tick.y)
+                if leg.measures:
+                    self.depth_map.record(  # where it was measured
+                        tick.x, self.last_depth, PRECISE if self.was_measuring else ROUGH,
+                        self._algae_top(depth, tick.prev_y))
+                leg.turn_depth = self._turn_depth(tick.lo, tick.hi, depth, tick.team.clock)
+        return Motion.TURN_UNDER if self._deep_enough(depth) else None
+
+    def _deep_enough(self, depth: float) -> bool:
+        turn_depth = self.in_leg.turn_depth
+        return turn_depth is not None and (depth >= turn_depth
+                                           or depth >= self.config.max_depth_m)
+
+    def _decide_exit(self, tick: Tick) -> Motion | None:
+        """Back out, sampling the algae's end, until ``margin_out_m`` past the edge
+        (past where a missed pass began; or, if the ice never ends, after
+        ``max_depth_m`` plus ``max_search_m``)."""
+        c, out = self.config, self.out_leg
+        if out.start_y is None:
+            out.start_y = tick.y
+        if self.return_y is not None:  # this pass missed the edge
+            if out.exit_y is None:
+                out.exit_y = self.return_y + c.margin_out_m
+        else:
+            self._measure_on_the_way_out(tick.x, tick.y, tick.prev_y, tick.ice, tick.algae)
+        far = out.start_y is not None and out.start_y - tick.y >= c.max_depth_m + c.max_search_m
+        if far and out.exit_y is None:  # the ice never ended: a sensor or the pose
+            out.exit_y = tick.y + c.margin_out_m  # is wrong; turn back out here
+        return Motion.TURN_OUT if self._out_far_enough(tick) else None
+
+    def _out_far_enough(self, tick: Tick) -> bool:
+        exit_y = self.out_leg.exit_y
+        return exit_y is not None and tick.y <= exit_y - self.config.margin_out_m
+
+    def _decide_arc(self, tick: Tick) -> Motion | None:
+        """Round the arc until it is on the next leg's heading."""
+        self.arc.turned += self.arc.sign * tick.rotation
+        if not self._arc_done(tick.theta):
+            return None
+        return Motion.EXIT if self.motion is Motion.TURN_UNDER else Motion.ENTER
+
+    def _arc_done(self, theta: float) -> bool:
+        """The arc ends on the leg's heading (+-y), whatever heading it began with."""
+        c, arc = self.config, self.arc
+        heading = -HALF_PI if self.motion is Motion.TURN_UNDER else HALF_PI
+        return ((arc.turned >= HALF_PI and arc.sign * wrap_pi(heading - theta) <= c.arc_end_rad)
+                or arc.turned >= c.max_arc_rad)
+
+    def _steer(self, tick: Tick) -> Steer:
+        """An arc's fixed curvature, or a straight leg holding its line."""
+        if self.motion in ARCS:
+            return Steer(self.arc.sign / self.arc.radius, self.motion)
+        heading = HALF_PI if self.motion in IN_LEG else -HALF_PI
+        self.was_measuring = self._measuring(tick.x, tick.y, tick.team.hurry)
+        return Steer(self._hold_line(tick.x, tick.theta, heading), self.motion,
+                     self.was_measuring)
+
+    def _measuring(self, x: float, y: float, hurry: bool) -> bool:
         """Whether this leg is about to cross an edge it measures, so goes slowly: on
         the way in, the ice edge where the in-legs found it (from ``edge_zone_m`` before
         it); under the ice, near where the depth map expects the algae to end, or
         anywhere if the map has no depth for this column yet; on the way out, the
         algae's end where the map expects it (from ``edge_zone_m`` before it), if the
         leg began below it. Never while the robot hurries to catch up with the team."""
-        c = self.config
-        if self.hurry:
+        c, leg, out = self.config, self.in_leg, self.out_leg
+        if hurry:
             return False
         if self.motion is Motion.ENTER:
             edge = self.depth_map.edge_y(x)
-            return edge is not None and -c.edge_zone_m < y - edge < 0.1
+            return edge is not None and -c.edge_zone_m < y - edge < c.past_edge_m
         if self.motion is Motion.EXIT:
-            if self.out_started_in_algae is not False or self.out_algae_top is not None:
+            if out.started_in_algae is not False or out.algae_top is not None:
                 return False
             edge = self.depth_map.edge_y(x)
             expected = self.depth_map.depths.get(self.depth_map.bin_of(x))
             return (edge is not None and expected is not None
-                    and -0.1 < y - edge - expected < c.edge_zone_m)
-        if self.motion is not Motion.UNDER or self.entry_y is None or self.turn_depth is not None:
+                    and -c.past_edge_m < y - edge - expected < c.edge_zone_m)
+        if self.motion is not Motion.UNDER or leg.entry_y is None or leg.turn_depth is not None:
             return False
         expected = self.depth_map.depths.get(self.depth_map.bin_of(x))
-        return expected is None or abs(y - self.entry_y - expected) < c.measure_zone_m
+        return expected is None or abs(y - leg.entry_y - expected) < c.measure_zone_m

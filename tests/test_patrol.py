@@ -12,7 +12,7 @@ import pytest
 
 from agent.controller import Controller, Gains, Neighbour, initial_segment
 from agent.depthmap import PRECISE, ROUGH, DepthMap
-from agent.patrol import Motion, Patrol, PatrolConfig
+from agent.patrol import InLeg, Motion, Patrol, PatrolConfig, TeamInput
 from agent.phase import position_to_phase, wrap_pi
 from simworld.maps import load_map
 from simworld.world import World
@@ -51,7 +51,7 @@ def test_patrol_asks_for_slow_legs_only_near_the_edges_it_measures():
     up = math.pi / 2
 
     def measuring_along(depths: list[float]) -> list[bool]:
-        patrol.motion, patrol.entry_y, patrol.prev_y, patrol.leg_y = Motion.ENTER, None, None, None
+        patrol.motion, patrol.in_leg, patrol.prev_y = Motion.ENTER, InLeg(), None
         out = [patrol.step(0.55, -0.05, up, False, False, 0.0, 2.0).measuring]  # water
         for y in depths:
             out.append(patrol.step(0.55, y, up, True, True, 0.0, 2.0).measuring)
@@ -350,8 +350,8 @@ def test_every_robot_puts_its_pass_lines_on_the_same_grid_of_phases():
         cfg = PatrolConfig()
         dm = DepthMap(0.0, 0.1, cfg.min_depth_m)
         patrol = Patrol(cfg, dm, x=hi - cfg.end_inset_m)
-        patrol.clock = 7.03  # the sweep that begins at hi, going down
-        patrol._start_turn(lo, hi, heading_in=True)
+        # the sweep that begins at hi, going down
+        patrol._start_turn(lo, hi, heading_in=True, team=TeamInput(clock=7.03))
         assert patrol.direction == -1 and patrol.sweeps == 1
         line, step = patrol.grid_x, patrol.spacing(lo, hi)
         phases = [position_to_phase(line - j * step, lo, hi, -1) for j in range(5)]
@@ -361,8 +361,7 @@ def test_every_robot_puts_its_pass_lines_on_the_same_grid_of_phases():
     # the next sweep the same way (two counts on) puts the grid elsewhere
     cfg = PatrolConfig()
     patrol = Patrol(cfg, DepthMap(0.0, 0.1, cfg.min_depth_m), x=6.0 - cfg.end_inset_m)
-    patrol.clock = 9.0
-    patrol._start_turn(2.4, 6.0, heading_in=True)
+    patrol._start_turn(2.4, 6.0, heading_in=True, team=TeamInput(clock=9.0))
     offset = (6.0 - patrol.grid_x) / patrol.spacing(2.4, 6.0) % 1.0
     assert offset != pytest.approx(levels[2][0], abs=0.05)
 
@@ -399,8 +398,9 @@ def test_a_line_is_aimed_at_the_nearest_new_column_within_reach_and_never_off_th
     patrol.config, patrol.direction = cfg, 1
     dm.learn(((12, 0.7),))  # a neighbour's depth counts as known
     assert aim(1.21) == 1.21
-    patrol.clock, patrol.grid_x, patrol.line_x, patrol.direction = 4.0, 1.3, 1.35, 1
-    patrol._start_turn(0.0, 3.0, heading_in=True)  # from the grid, not the aimed line
+    patrol.grid_x, patrol.line_x, patrol.direction = 1.3, 1.35, 1
+    # from the grid, not the aimed line
+    patrol._start_turn(0.0, 3.0, heading_in=True, team=TeamInput(clock=4.0))
     assert patrol.grid_x == pytest.approx(1.3 + patrol.spacing(0.0, 3.0))
     assert patrol.arc_from_grid == 1.3 and patrol.arc_from_x == 1.35
 
@@ -416,8 +416,8 @@ def test_a_robot_counts_sweeps_with_its_lower_neighbour():
                       turns=40 * math.pi + ctrl.phase_des - 0.05)
     out = ctrl.step(0.1, 2.0, -0.3, math.pi / 2, False, False, lower, None, True, False)
     assert out.turns == pytest.approx(lower.turns + wrap_pi(out.phase_des - lower.phase_des))
-    assert ctrl.patrol.clock == pytest.approx(out.turns / math.pi)
-    assert round(ctrl.patrol.clock) == 40
+    assert ctrl.clock == pytest.approx(out.turns / math.pi)
+    assert round(ctrl.clock) == 40
 
 
 def test_a_way_in_that_began_under_the_ice_measures_nothing():
@@ -436,10 +436,9 @@ def test_a_robot_hurrying_to_catch_up_measures_nothing_slowly():
     cfg = PatrolConfig()
     dm = DepthMap(0.0, 0.1, cfg.min_depth_m)
     patrol = Patrol(cfg, dm, x=0.55)
-    patrol.hurry = True
     track = [(-0.1, math.pi / 2, False, False)] + [
         (-0.025 + 0.05 * i, math.pi / 2, True, i < 18) for i in range(22)]
-    steers = [patrol.step(0.55, y, th, ice, algae, 0.0, 2.0)
+    steers = [patrol.step(0.55, y, th, ice, algae, 0.0, 2.0, TeamInput(hurry=True))
               for y, th, ice, algae in track]
     assert not any(s.measuring for s in steers)  # not even in a column never measured
     assert dm.kind[5] == ROUGH  # its sample counts for less than a slow one
@@ -451,10 +450,10 @@ def test_a_controller_well_behind_its_desired_phase_hurries():
     ctrl = Controller(0, 0.0, 2.0, 0.0, 6.0, x=1.0)
     for _ in range(2):
         out = ctrl.step(0.1, 1.0, -0.3, math.pi / 2, False, False, None, None, False, False)
-    assert not ctrl.patrol.hurry
+    assert not ctrl.hurry
     ctrl.phase_des = out.phase + 0.6  # the team is 0.6 rad ahead of this robot
     ctrl.step(0.1, 1.0, -0.3, math.pi / 2, False, False, None, None, False, False)
-    assert ctrl.patrol.hurry
+    assert ctrl.hurry
 
 
 def test_a_neighbours_measurement_beats_a_sample_taken_on_the_bins_side():

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from agent.controller import Controller, Gains, Neighbour, initial_segment
 from agent.depthmap import DepthMap
-from agent.patrol import Patrol, PatrolConfig
+from agent.patrol import Patrol, PatrolConfig, TeamInput
 from agent.phase import leg_speed, position_to_phase
 from agent.team import ChainMax, TeamRate, chain_max, cycle_for, passes_for, team_max
 
@@ -344,7 +344,7 @@ def test_a_chain_of_controllers_agrees_on_the_roots_passes_and_cycle(team):
         i = c.robot
         assert c.published.need_below == max(need_of(d) for d in ctrls[: i + 1])
         assert c.published.need_above == max(need_of(d) for d in ctrls[i:])
-        assert c.patrol.team_passes == passes
+        assert c.passes == passes  # what it tells its patrol (TeamInput.passes)
 
     # the root dies: robot 1 no longer has a lower neighbour (its last state is still
     # at hand, but membership says it is gone) and becomes the root
@@ -444,10 +444,9 @@ def test_the_passes_split_the_segment_exactly_and_step_the_phase_by_pi_over_pass
 
 def test_the_patrol_takes_the_teams_passes_only_at_a_new_sweep():
     patrol = Patrol(PatrolConfig(passes_per_sweep=4), DepthMap(0.0, 0.1, 0.3), x=1.05)
-    patrol.team_passes = 7
     while patrol.sweeps == 0:  # this sweep keeps its spacing
         assert patrol.spacing(1.0, 3.0) == 0.5
-        patrol._start_turn(1.0, 3.0, heading_in=True)
+        patrol._start_turn(1.0, 3.0, heading_in=True, team=TeamInput(passes=7))
     assert patrol.passes == 7 and patrol.spacing(1.0, 3.0) == pytest.approx(2.0 / 7)
 
 
