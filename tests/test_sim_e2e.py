@@ -20,11 +20,14 @@ SUMMARY_KEYS = {
 }
 
 
+HALF_S = 400  # simulated seconds of the half-algae run: workload inside its band by ~200 s
+
+
 @pytest.fixture(scope="module")
 def half_algae_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("sim") / "half"
     result = run_sim(out, "--robots", "3", "--map", "half-algae", "--start", "ahead:1",
-                     "--localization", "truth", "--duration", "600", "--seed", "3",
+                     "--localization", "truth", "--duration", str(HALF_S), "--seed", "3",
                      "--progress-every", "1", quiet=False)
     assert result.returncode == 0, result.stderr[-3000:]
     return out, result
@@ -34,12 +37,12 @@ def test_progress_lines_follow_the_run(half_algae_run):
     """The launcher's progress lines (from its queries to the recorder): simulated time
     going forward, the speed, the errors the agents see and who is alive."""
     _, result = half_algae_run
-    pattern = re.compile(r"^t = +([\d.]+) / 600 s +([\d.]+)x real time +\|e_phi\| ([\d.]+) "
+    pattern = re.compile(rf"^t = +([\d.]+) / {HALF_S} s +([\d.]+)x real time +\|e_phi\| ([\d.]+) "
                          r"rad +\|e_psi\| ([\d.]+) m\^2 +live \[0, 1, 2\]$")
     lines = [m for m in map(pattern.match, result.stdout.splitlines()) if m]
     assert len(lines) >= 3, result.stdout[-2000:]
     times = [float(m.group(1)) for m in lines]
-    assert times == sorted(times) and times[-1] > times[0] and times[-1] <= 600
+    assert times == sorted(times) and times[-1] > times[0] and times[-1] <= HALF_S
     assert all(float(m.group(2)) > 0 for m in lines[1:])
     # robot 1 starts 72 degrees ahead: the first line's phase error is the larger
     assert float(lines[0].group(3)) > float(lines[-1].group(3))
@@ -56,7 +59,7 @@ def test_errors_shrink_half_algae_robot1_ahead(half_algae_run):
     assert summary["workload_q4_m2"] < summary["workload_q1_m2"] / 4, summary
     assert summary["phase_sse_rad"] < 0.169  # the thesis's in-phase half-algae cell
     assert summary["speedup"] > 0  # measured and quoted (how fast is the bench's business)
-    assert summary["ticks"] == 6000  # every tick of 600 s at 10 Hz is in the recording
+    assert summary["ticks"] == 10 * HALF_S  # every tick at 10 Hz is in the recording
     assert summary["invalid_messages"] == 0
 
 
