@@ -7,6 +7,25 @@ import pytest
 from tests.procutil import run_sim
 
 
+@pytest.fixture(scope="session", autouse=True)
+def netns_teams_in_background(request, tmp_path_factory):
+    """The cross-host teams of tests/test_netns.py, started at the session's first test
+    when any of that file's tests is to run (and network namespaces are here): their two
+    minutes on the wall clock pass while the rest of the suite runs. Each ends every
+    process it started, by pid, however the tests go."""
+    if not any(item.path.name == "test_netns.py" for item in request.session.items):
+        yield None
+        return
+    from tests import test_netns
+
+    if test_netns.REASON is not None:
+        yield None
+        return
+    background = test_netns.Background(tmp_path_factory.mktemp("netns")).start()
+    yield background
+    background.thread.join(test_netns.DURATION_S + 300)
+
+
 @pytest.fixture(scope="session")
 def pf_run(tmp_path_factory):
     """A short particle-filter run with a row of two scanners and the particle clouds

@@ -183,26 +183,54 @@ class Team:
         self.site.close()  # ends every process it started, by pid
 
 
-@pytest.fixture(scope="module")
-def teams(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("netns")
-    both = [Team("clean", tmp, impaired=False), Team("impaired", tmp, impaired=True)]
-    try:
-        for team in both:
-            team.start()
-        deadline = time.monotonic() + DURATION_S + 120
-        while any(t.world_running() for t in both):
-            assert time.monotonic() < deadline, "the runs did not finish"
+class Background:
+    """Both teams' whole runs (about two minutes of wall time, nearly all of it waiting on
+    the wall clock) in a thread: tests/conftest.py starts it at the session's first test,
+    so that the rest of the suite runs meanwhile, and ``teams`` waits for its end."""
+
+    def __init__(self, tmp: Path) -> None:
+        self.both = [Team("clean", tmp, impaired=False), Team("impaired", tmp, impaired=True)]
+        self.error: BaseException | None = None
+        self.thread = threading.Thread(target=self._run, name="netns-teams", daemon=True)
+
+    def start(self) -> Background:
+        self.thread.start()
+        return self
+
+    def _run(self) -> None:
+        both = self.both
+        try:
             for team in both:
-                team.step()
-            time.sleep(0.02)
-        for team in both:
-            code = team.procs["world"].returncode  # type: ignore[attr-defined]
-            assert code == 0, (team.name, (team.site.logs / "world.log").read_text()[-2000:])
-    finally:
-        for team in both:
-            team.close()
-    return {t.name: t for t in both}
+                team.start()
+            deadline = time.monotonic() + DURATION_S + 120
+            while any(t.world_running() for t in both):
+                assert time.monotonic() < deadline, "the runs did not finish"
+                for team in both:
+                    team.step()
+                time.sleep(0.02)
+            for team in both:
+                code = team.procs["world"].returncode  # type: ignore[attr-defined]
+                assert code == 0, (team.name,
+                                   (team.site.logs / "world.log").read_text()[-2000:])
+        except BaseException as exc:  # handed to the tests, which fail on it
+            self.error = exc
+        finally:
+            for team in both:
+                team.close()
+
+    def result(self) -> dict[str, Team]:
+        self.thread.join(DURATION_S + 300)
+        assert not self.thread.is_alive(), "the cross-host runs did not end"
+        if self.error is not None:
+            raise self.error
+        return {t.name: t for t in self.both}
+
+
+@pytest.fixture(scope="module")
+def teams(netns_teams_in_background, tmp_path_factory):
+    background = netns_teams_in_background or Background(
+        tmp_path_factory.mktemp("netns")).start()
+    return background.result()
 
 
 # The phase moves one pass at a time (agent.phase): with 7 passes a step is 0.45 rad,
