@@ -406,12 +406,9 @@ class Patrol:
         c, depth_map = self.config, self.depth_map
         step = self.spacing(lo, hi)
         reach = c.aim_fraction * step
-        ahead = line + self.direction * (step - c.cover_m)  # the next line's cover
-        behind_prev = (self.arc_from_x - c.cover_m, self.arc_from_x + c.cover_m)
-        inside_lo = max(lo + c.end_inset_m, line - reach, behind_prev[0],
-                        ahead if self.direction > 0 else -math.inf)
-        inside_hi = min(hi - c.end_inset_m, line + reach, behind_prev[1],
-                        ahead if self.direction < 0 else math.inf)
+        last, after = self.arc_from_x, line + self.direction * step  # the legs either side
+        inside_lo = max(lo + c.end_inset_m, line - reach, last - c.cover_m, after - c.cover_m)
+        inside_hi = min(hi - c.end_inset_m, line + reach, last + c.cover_m, after + c.cover_m)
         if not depth_map.known(depth_map.bin_of(line)) and depth_map.staleness(line) > 0:
             return line  # already in a new column's middle
         best = line
