@@ -24,14 +24,6 @@ from agent.phase import (
 )
 from agent.team import TeamRate, chain_max, cycle_for, passes_for, team_max
 
-# A robot tells its neighbours its depths this close to its ends: at least 0.3 m, and
-# half its segment, as far as a boundary can move into it before the neighbour would
-# measure those columns itself.
-SHARED_REACH_M = 0.3
-SHARED_REACH_FRACTION = 0.5
-HURRY_RAD = 0.4  # a robot this far behind its desired phase measures nothing slowly
-AHEAD_WAIT_RAD = 0.5  # a robot this far ahead of its desired phase waits on its leg
-
 
 @dataclass(frozen=True)
 class Gains:
@@ -48,10 +40,21 @@ class Gains:
     # No segment shorter: a deep bloom shared by many robots needs segments of 0.2 m
     # and less for equal work (16 passes 1 cm apart are still a patrol).
     min_segment_m: float = 0.15
+    # A robot tells its neighbours its depths this close to its ends: at least
+    # shared_reach_m, and shared_reach_fraction of its segment, as far as a boundary can
+    # move into it before the neighbour would measure those columns itself.
+    shared_reach_m: float = 0.3
+    shared_reach_fraction: float = 0.5
+    hurry_rad: float = 0.4  # a robot this far behind its desired phase measures nothing slowly
+    ahead_wait_rad: float = 0.5  # a robot this far ahead of its desired phase waits on its leg
 
     def __post_init__(self) -> None:
         if self.k_s <= 0 or self.k_phi <= 0:
             raise ValueError("gains must be positive")
+        if min(self.shared_reach_m, self.shared_reach_fraction, self.hurry_rad,
+               self.ahead_wait_rad) <= 0:
+            raise ValueError("shared_reach_m, shared_reach_fraction, hurry_rad and "
+                             "ahead_wait_rad must be positive")
         if self.cycle_s < 0 or self.max_lead_rad <= 0 or self.min_segment_m <= 0:
             raise ValueError("cycle_s must be >= 0, max_lead_rad and min_segment_m positive")
         if not self.cycle_margin >= 1.0:
@@ -237,7 +240,7 @@ class Controller:
         if before is not None and self.published is not None:
             lag = wrap_pi(before - position_to_phase(x, self.lo, self.hi,
                                                      self.patrol.view.direction))
-            self.hurry = lag > HURRY_RAD
+            self.hurry = lag > self.gains.hurry_rad
         self.cycle_s, self.passes, chain = self._agree(dt, lower, upper, has_lower, has_upper)
         rate = TWO_PI / self.cycle_s
         steer = self.patrol.step(x, y, theta, ice, algae, self.lo, self.hi,
@@ -262,7 +265,7 @@ class Controller:
         v, omega = wheel_limited(v, v * steer.curvature, self.limits)
         depth_avg = self.depth_map.average(self.lo, self.hi)
         workload = depth_avg * (self.hi - self.lo)
-        reach = max(SHARED_REACH_M, SHARED_REACH_FRACTION * (self.hi - self.lo))
+        reach = max(g.shared_reach_m, g.shared_reach_fraction * (self.hi - self.lo))
         ends = self.depth_map.near_ends(self.lo, self.hi, reach)
         self.published = Neighbour(self.robot, self.lo, self.hi, self.phase_des, workload,
                                    self.turns, ends, self.cycle_s, self.passes, *chain)
@@ -290,7 +293,7 @@ class Controller:
         p, view, lim = self.patrol, self.patrol.view, self.limits
         lead = 0.5 * rate * p.arc_time_s(self.lo, self.hi, lim.v_max, lim.wheel_base_m)
         if steer.motion in (Motion.ENTER, Motion.UNDER, Motion.EXIT):
-            if wrap_pi(self.phase_des - phase) < -AHEAD_WAIT_RAD:
+            if wrap_pi(self.phase_des - phase) < -self.gains.ahead_wait_rad:
                 return 0.0  # well ahead of the team (one started ahead): let it come
             level = position_to_phase(view.grid_x, self.lo, self.hi, view.direction)
             middle = level + 0.5 * math.pi / view.passes
