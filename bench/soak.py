@@ -1,0 +1,256 @@
+"""A long run with chaos: memory, the recording and the errors against simulated time.
+
+Runs ``btrack sim --localization truth --chaos SEED`` for ``--hours`` simulated hours
+(kills and restarts, freezes and thaws, joins: ``deploy.faults.chaos_schedule``) and,
+while it runs, reads every process of the run from /proc every ``--every`` wall
+seconds: its resident memory, by role (world, recorder, router, launcher, agent I; a
+restarted agent is a new process under the same name). Afterwards it reads the
+recording: the ticks' wall stamps put every reading on simulated time, and the
+team's errors (position phase, eq. 3.1, and workload with the true depth, mean |e|
+over the neighbour pairs) are averaged hour by hour. What was lost: ticks the
+recording lacks against the run's, messages the processes dropped as malformed or
+refused as implausible, and commands the world timed out on.
+
+    .venv/bin/python bench/soak.py [--hours 24] [--robots 3] [--chaos 7] [--out DIR]
+
+Writes DIR/soak.json (every reading, the hourly errors, the counts) and DIR/soak.png,
+and prints the table BENCHMARKS.md quotes: each process's memory at the end of hour 1
+and at the end of the run, the recording's size, the errors by hour, what was lost.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import subprocess
+import sys
+import tempfile
+import time
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import numpy as np  # noqa: E402
+from speed import world_summary  # noqa: E402
+from tick_cpu import children_of  # noqa: E402
+
+HOUR_S = 3600.0
+DEFAULT_MAP = "half-algae"
+
+
+def process_name(cmdline: list[str]) -> str:
+    """A reading's name: ``agent 2``, ``world``, ``recorder``, ``router``, ``launcher``;
+    ``other`` for anything else below the launcher."""
+    if "btrack" not in "".join(cmdline[:2]) and not any(a.endswith("btrack") for a in cmdline):
+        return "other"
+    args = cmdline[next(i for i, a in enumerate(cmdline) if a.endswith("btrack")) + 1:]
+    sub = args[0] if args else ""
+    if sub == "agent" and "--id" in args:
+        return f"agent {args[args.index('--id') + 1]}"
+    return {"sim": "launcher", "record": "recorder"}.get(sub, sub or "other")
+
+
+def read_rss_mb(pid: int) -> float | None:
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            for line in f:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return None  # ended, or a zombie
+
+
+def read_cmdline(pid: int) -> list[str]:
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as f:
+            return f.read().decode(errors="replace").split("\0")
+    except OSError:
+        return []
+
+
+def wall_to_sim(wall_ns: np.ndarray, tick_wall_ns: np.ndarray, tick_t: np.ndarray
+                ) -> np.ndarray:
+    """Each wall stamp on the run's simulated time, from the ticks' own wall stamps
+    (NaN before the first tick; the last tick's time after the run)."""
+    order = np.argsort(tick_wall_ns)
+    w, t = tick_wall_ns[order].astype(float), tick_t[order]
+    out = np.interp(wall_ns.astype(float), w, t)
+    out[wall_ns < w[0]] = np.nan
+    return np.asarray(out)
+
+
+def hourly_means(t: np.ndarray, error: np.ndarray, hours: int) -> list[float]:
+    """The mean of |error| (pairs x ticks, NaN where not a pair) within each simulated
+    hour; NaN for an hour without a value."""
+    out = []
+    for h in range(hours):
+        inside = (t >= h * HOUR_S) & (t < (h + 1) * HOUR_S)
+        values = np.abs(error[:, inside])
+        values = values[np.isfinite(values)]
+        out.append(float(values.mean()) if values.size else math.nan)
+    return out
+
+
+def memory_at(readings: list[dict[str, Any]], sim_t: float) -> dict[str, float]:
+    """Each process's last reading at or before simulated time ``sim_t``."""
+    last: dict[str, float] = {}
+    for r in readings:
+        if math.isfinite(r["sim_t"]) and r["sim_t"] <= sim_t:
+            last[r["name"]] = r["rss_mb"]
+    return last
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="bench/soak.py", description=__doc__.split("\n\n")[0])
+    p.add_argument("--hours", type=float, default=24.0, help="simulated hours (24)")
+    p.add_argument("--robots", type=int, default=3, help="team size (3)")
+    p.add_argument("--map", default=DEFAULT_MAP, help=f"map ({DEFAULT_MAP})")
+    p.add_argument("--chaos", type=int, default=7, help="seed of the chaos schedule (7)")
+    p.add_argument("--every", type=float, default=5.0,
+                   help="wall seconds between two readings of /proc (5)")
+    p.add_argument("--out", type=Path, help="output directory (a fresh temporary one)")
+    return p
+
+
+def run_and_watch(args: argparse.Namespace, out: Path) -> tuple[list[dict[str, Any]], int]:
+    btrack = str(Path(sys.executable).parent / "btrack")
+    cmd = [btrack, "sim", "--robots", str(args.robots), "--map", args.map,
+           "--localization", "truth", "--duration", str(args.hours * HOUR_S),
+           "--chaos", str(args.chaos), "--no-report", "--no-scene", "--quiet",
+           "--out", str(out)]
+    readings: list[dict[str, Any]] = []
+    names: dict[int, str] = {}
+    recording = out / "run.mcap"
+    with open(out / "launcher.log", "wb") as log:
+        launcher = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
+        try:
+            next_report = time.monotonic() + 60
+            while launcher.poll() is None:
+                now_ns = time.time_ns()
+                for pid in children_of(launcher.pid):
+                    if pid not in names:
+                        names[pid] = process_name(read_cmdline(pid))
+                    rss = read_rss_mb(pid)
+                    if rss is not None and names[pid] != "other":
+                        readings.append({"wall_ns": now_ns, "pid": pid, "name": names[pid],
+                                         "rss_mb": rss})
+                size = recording.stat().st_size if recording.exists() else 0
+                readings.append({"wall_ns": now_ns, "pid": 0, "name": "recording",
+                                 "rss_mb": size / 2**20})
+                if time.monotonic() >= next_report:
+                    print(f"  {len(readings)} readings, recording {size / 2**20:.0f} MB",
+                          file=sys.stderr, flush=True)
+                    next_report += 60
+                time.sleep(args.every)
+        finally:
+            if launcher.poll() is None:
+                launcher.terminate()
+            code = launcher.wait()
+    return readings, code
+
+
+def analyse(args: argparse.Namespace, out: Path, readings: list[dict[str, Any]]
+            ) -> dict[str, Any]:
+    from report.load import load_run
+    from report.series import run_table
+
+    run = load_run(out / "run.mcap")
+    tick_t = np.asarray(run.tick_t, dtype=float)
+    tick_wall = np.asarray(run.tick_log_ns, dtype=np.int64)
+    sims = wall_to_sim(np.array([r["wall_ns"] for r in readings], dtype=np.int64),
+                       tick_wall, tick_t)
+    for r, s in zip(readings, sims, strict=True):
+        r["sim_t"] = float(s)
+    hours = max(1, math.ceil(args.hours))
+    errors = run_table(run).errors
+    expected = round(args.hours * HOUR_S / 0.1)
+    lost = {"ticks_recorded": int(tick_t.size), "ticks_expected": expected,
+            "invalid_recorded": run.invalid, "rejected_recorded": sum(run.rejected.values()),
+            "refused": run.refused, "recording_cut_short": run.cut_short}
+    try:
+        world = world_summary(out)
+        lost.update({f"world_{k}": world.get(k) for k in ("dropped", "rejected", "timeouts")})
+    except (OSError, ValueError, StopIteration) as exc:
+        lost["world_summary"] = f"not read: {exc}"
+    end_t = float(tick_t[-1]) if tick_t.size else 0.0
+    return {
+        "hours": args.hours, "robots": args.robots, "map": args.map, "chaos": args.chaos,
+        "faults": len(run.faults),
+        "memory_hour_1": memory_at(readings, HOUR_S),
+        "memory_end": memory_at(readings, end_t),
+        "phase_by_hour_rad": hourly_means(errors.t, errors.phase, hours),
+        "workload_by_hour_m2": hourly_means(errors.t, errors.workload, hours),
+        "lost": lost, "readings": readings,
+    }
+
+
+def figure(result: dict[str, Any], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (mem, rec, err) = plt.subplots(3, 1, figsize=(9, 9), sharex=True)
+    by_name: dict[str, list[tuple[float, float]]] = defaultdict(list)
+    for r in result["readings"]:
+        if math.isfinite(r["sim_t"]):
+            by_name[r["name"]].append((r["sim_t"] / HOUR_S, r["rss_mb"]))
+    for name, points in sorted(by_name.items()):
+        ax = rec if name == "recording" else mem
+        ax.plot(*zip(*points, strict=True), ".", markersize=2, label=name)
+    mem.set_ylabel("resident MB")
+    mem.legend(fontsize=7, ncol=4)
+    rec.set_ylabel("run.mcap MB")
+    hours = np.arange(len(result["phase_by_hour_rad"])) + 0.5
+    err.plot(hours, result["phase_by_hour_rad"], "o-", label="position phase, rad")
+    err.plot(hours, result["workload_by_hour_m2"], "s-", label="workload, m^2")
+    err.set_yscale("log")
+    err.set_xlabel("simulated hours")
+    err.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def table(result: dict[str, Any]) -> str:
+    one, end = result["memory_hour_1"], result["memory_end"]
+    lines = ["| process | MB at hour 1 | MB at the end |", "| --- | --- | --- |"]
+    for name in sorted(set(one) | set(end)):
+        lines.append(f"| {name} | {one.get(name, math.nan):.1f} | {end.get(name, math.nan):.1f} |")
+    lines += ["", "| hour | position phase rad | workload m^2 |", "| --- | --- | --- |"]
+    for h, (p, w) in enumerate(zip(result["phase_by_hour_rad"], result["workload_by_hour_m2"],
+                                   strict=True)):
+        lines.append(f"| {h + 1} | {p:.4f} | {w:.4f} |")
+    lines += ["", "lost: " + json.dumps(result["lost"]) + f"; faults injected: {result['faults']}"]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    if not (args.hours > 0 and args.robots >= 2 and args.every > 0):
+        print("bench/soak.py: --hours and --every must be positive, --robots at least 2",
+              file=sys.stderr)
+        return 2
+    out = args.out or Path(tempfile.mkdtemp(prefix="soak-"))
+    out.mkdir(parents=True, exist_ok=True)
+    began = time.monotonic()
+    readings, code = run_and_watch(args, out)
+    if code != 0:
+        print(f"bench/soak.py: btrack sim exited {code}; see {out}/launcher.log",
+              file=sys.stderr)
+    result = analyse(args, out, readings)
+    result["wall_s"] = round(time.monotonic() - began, 1)
+    result["sim_exit"] = code
+    (out / "soak.json").write_text(json.dumps(result, indent=1, allow_nan=True) + "\n")
+    figure(result, out / "soak.png")
+    print(table(result))
+    print(f"wall {result['wall_s']} s; {out}/soak.json, {out}/soak.png")
+    return 0 if code == 0 else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
