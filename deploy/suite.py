@@ -141,9 +141,13 @@ def _progress(case: Case, done: int, total: int, summary: dict[str, Any]) -> str
     head = f"[{done}/{total}] {case.map:<12} {case.start:<8} {case.wall_s:6.1f} s wall"
     if "error" in summary:
         return f"{head}  FAILED: {summary['error']}"
-    return (f"{head}  phase {summary['phase_sse_rad']:.4f} rad (thesis "
-            f"{summary['thesis_phase_sse_rad']:.3f})  workload {summary['workload_sse_m2']:.4f}"
-            f" m^2 (thesis {summary['thesis_workload_sse_m2']:.3f})")
+    def num(key: str, spec: str) -> str:
+        value = summary.get(key)  # a case that measured nothing (no last quarter) has None
+        return format(value, spec) if isinstance(value, (int, float)) else "n/a"
+
+    return (f"{head}  phase {num('phase_sse_rad', '.4f')} rad (thesis "
+            f"{num('thesis_phase_sse_rad', '.3f')})  workload {num('workload_sse_m2', '.4f')}"
+            f" m^2 (thesis {num('thesis_workload_sse_m2', '.3f')})")
 
 
 def run_launchers(cases: list[Case], argv: Callable[[Case], list[str]], jobs: int,

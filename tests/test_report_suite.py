@@ -43,3 +43,17 @@ def test_other_measures_quote_the_path_phase_and_the_relative_workload() -> None
     row = dict(zip(header, old, strict=True))
     assert row["phase, path length (rad)"] == "0.031"  # from phase_sse_path_rad
     assert row["workload / mean workload, steady state / max (%)"] == "n/a / n/a"
+
+
+def test_a_case_that_measured_nothing_prints_n_a_and_does_not_end_the_suite() -> None:
+    """A case whose agent fell out of the run has no last quarter: its summary's errors
+    are None, and the progress line said so by raising (the suite ended)."""
+    from pathlib import Path
+
+    from deploy.suite import Case, _progress
+
+    case = Case("no-algae", "ahead:0", Path("x"))
+    case.wall_s = 12.0
+    line = _progress(case, 2, 12, {"phase_sse_rad": None, "thesis_phase_sse_rad": 0.093,
+                                   "workload_sse_m2": None, "thesis_workload_sse_m2": 0.013})
+    assert "phase n/a rad (thesis 0.093)" in line and "workload n/a m^2" in line
