@@ -290,20 +290,21 @@ HIL_REFUSED = (("fault", "--fault"), ("chaos", "--chaos"), ("kidnap", "--kidnap"
 
 def hil_refusal(args: argparse.Namespace) -> str | None:
     """Why an option cannot go with --hil (or --hil-faults without it); None if none.
-    The hardware loop runs on the wall clock with its own devices' odometry and the
-    poses its world sends: faults, kidnaps, odometry noise and the particle filter are
-    the simulator's."""
+    The hardware loop runs on the wall clock with its own devices' odometry, on the
+    particle filter's poses from the emulated LMS (or the poses its world sends, with
+    --localization truth): faults, kidnaps, odometry noise and dead reckoning are the
+    simulator's."""
     if not args.hil:
         return "--hil-faults needs --hil" if args.hil_faults is not None else None
     defaults = build_parser().parse_args([])
     given = [flag for name, flag in HIL_REFUSED if getattr(args, name) != getattr(defaults, name)]
-    if args.localization not in (None, "truth"):
+    if args.localization not in (None, "truth", "pf"):
         given.append(f"--localization {args.localization}")
     if args.boot_s != defaults.boot_s:
         given.append("--boot-s")
     if given:
         return (f"{', '.join(given)}: not with --hil (the hardware loop runs its own "
-                "devices on the wall clock, on the poses its world sends)")
+                "devices on the wall clock, on the filter's or its world's poses)")
     return None
 
 
@@ -387,7 +388,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     why = hil_refusal(args) or refusal(args, bodies)
     if args.localization is None:
-        args.localization = "truth" if args.hil else "pf"
+        args.localization = "pf"
     if why is None and not args.hil:
         late = [f for f in schedule if f.at_s >= args.duration]
         if late:

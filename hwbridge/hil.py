@@ -4,7 +4,10 @@ Processes, each its own OS process on a fresh namespace over loopback: the recor
 ``btrack bridge hil-world`` (the simulator's physics behind emulated Creates and an
 emulated LMS on pseudo-terminals), one ``btrack bridge create`` per robot and one
 ``btrack bridge lms`` (the real bridges, opening the pseudo-terminals as they would
-open /dev/ttyUSB*), and the agents. Hardware time is the wall clock, so the run lasts
+open /dev/ttyUSB*), the localizer on the LMS bridge's scans (``--timing measured``:
+each scan at its measurement time, as a real LMS sends them, about 5 a second at
+38400 baud; with ``--localization truth`` the world sends the true poses instead and no
+localizer runs), and the agents. Hardware time is the wall clock, so the run lasts
 ``--duration`` wall seconds. At the end: the report from the recording, and
 ``summary.json`` gains ``"hil": true`` and ``serial_errors`` (what each bridge counted
 and survived), plus the bridges' serial throughput and the scan rate.
@@ -32,7 +35,9 @@ from deploy.procs import (
     free_port,
     stop_interrupted,
 )
+from hwbridge.hil_world import laser_pose
 from simworld.maps import MapError, load_map
+from simworld.world import World
 from wire import Keys
 from wire.session import SessionOptions, open_session
 
@@ -124,18 +129,24 @@ def plan(args: argparse.Namespace, epoch: float) -> HilPlan:
     on_epoch = ["--epoch", repr(epoch)]
     n = args.robots
     edge = f"{gmap.edge_lo!r},{gmap.edge_hi!r}"
-    commands = {
+    localization = args.localization or "pf"
+    lx, ly, lth = laser_pose(World(gmap, n, args.start, args.seed))
+    commands: dict[str, list[str]] = {
         "recorder": ["record", "--out", str(out), *member],
         "hil-world": [
             "bridge", "hil-world", "--dir", str(devices), "--robots", str(n),
             "--map", args.map, "--scale", str(args.scale), "--start", args.start,
             "--seed", str(args.seed), "--duration", str(args.duration),
-            "--faults", str(faults), "--wait-recorder", *on_epoch, *member],
+            "--faults", str(faults), "--wait-recorder", "--localization", localization,
+            *on_epoch, *member],
         **{f"bridge{i}": [
             "bridge", "create", "--port", str(devices / f"create{i}"), "--id", str(i),
             "--model", "create", "--edge", edge, *on_epoch, *member] for i in range(n)},
         "bridge-lms": ["bridge", "lms", "--port", str(devices / "lms"), "--baud", "38400",
-                       *on_epoch, *member],
+                       "--pose", f"{lx!r},{ly!r},{lth!r}", *on_epoch, *member],
+        # the filter on the LMS's scans at their measured times (localizer.timeline)
+        **({"localizer": ["localizer", "--robots", str(n), "--timing", "measured",
+                          "--seed", str(args.seed), *member]} if localization == "pf" else {}),
         **{f"agent{i}": [
             "agent", "--id", str(i), "--robots", str(n), "--neighbour-timeout",
             str(NEIGHBOUR_TIMEOUT_S), *forward_flags(args, AGENT_FLAGS), *member]
@@ -191,6 +202,9 @@ def run_plan(p: HilPlan, map_name: str, start: str, duration: float) -> int:
                 return fail(group, world, "did not create its devices", name)
             bridges = [group.start(f"bridge{i}", p.commands[f"bridge{i}"]) for i in range(n)]
             lms = group.start("bridge-lms", p.commands["bridge-lms"])
+            helpers = [lms]
+            if "localizer" in p.commands:
+                helpers.append(group.start("localizer", p.commands["localizer"]))
             agents = [group.start(f"agent{i}", p.commands[f"agent{i}"]) for i in range(n)]
             last_print = time.monotonic()
             while world.alive() and not world.last_json():
@@ -198,7 +212,7 @@ def run_plan(p: HilPlan, map_name: str, start: str, duration: float) -> int:
                     world.proc.wait(0.5)
                 except Exception:
                     pass
-                for child in (*bridges, lms, *agents, recorder):
+                for child in (*bridges, *helpers, *agents, recorder):
                     # the recorder ends by itself, cleanly, once it has the done Tick
                     if not child.alive() and not (child is recorder
                                                   and child.proc.returncode == 0):
@@ -212,7 +226,7 @@ def run_plan(p: HilPlan, map_name: str, start: str, duration: float) -> int:
                 recorder.proc.wait(20)
             except Exception:
                 pass
-            for child in (*agents, *bridges, lms):  # before the devices go away
+            for child in (*agents, *bridges, *helpers):  # before the devices go away
                 group.stop(child)
             group.stop_all()
     except KeyboardInterrupt as exc:

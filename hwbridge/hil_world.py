@@ -11,9 +11,12 @@ discs from the laser's pose. ``--faults P`` damages that fraction of the devices
 messages (garbage, a flipped bit, a cut) so the bridges must resynchronise.
 
 What only a simulator can know it publishes itself, as ``btrack world`` does: ``Truth``
-and a truth ``Pose`` of every robot at each tick of the run's epoch grid (k = t // dt,
-the ticks the bridges publish their Sense on), so agents run as in ``btrack sim
---localization truth``; ``Tick`` and ``WorldInfo`` for the recorder and the report.
+of every robot at each tick of the run's epoch grid (k = t // dt, the ticks the bridges
+publish their Sense on), for the report, and with ``--localization truth`` a truth
+``Pose`` too, so agents run as in ``btrack sim --localization truth`` (with ``pf`` the
+localizer gives the poses, from the LMS bridge's scans, and the run waits for it);
+``Tick`` and ``WorldInfo`` for the recorder and the report. The emulated LMS sees the
+robots where they were at its sweep's middle, 13 ms before its telegram.
 It waits for the whole team (and the recorder) like the world does, runs ``--duration``
 wall seconds, ends with a done Tick, prints its counters as JSON and keeps the devices
 plugged in until SIGTERM.
@@ -22,6 +25,7 @@ plugged in until SIGTERM.
 from __future__ import annotations
 
 import argparse
+import collections
 import json
 import logging
 import math
@@ -55,6 +59,8 @@ ICE_ANALOG = 850  # what the upward IR sensor reads under ice (bright, near)
 WATER_ANALOG = 120  # and under open sky / water
 LASER_BEHIND_M = 1.0  # DESIGN.md: the laser 1 m behind the robots' start line
 INFO_EVERY_S = 10.0
+SWEEP_MIDDLE_S = 1.0 / 75.0  # half of two 75 Hz mirror turns (lms_bridge.TURNS)
+HISTORY_STEPS = 8  # physics steps kept for it (at 100 Hz: 70 ms)
 LINGER_S = 60.0  # after the run, keep the devices until SIGTERM (at most this long)
 
 
@@ -103,6 +109,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="fraction of device messages damaged on purpose (0)")
     p.add_argument("--startup-timeout", type=float, default=90.0)
     p.add_argument("--wait-recorder", action="store_true")
+    p.add_argument("--localization", choices=["truth", "pf"], default="truth",
+                   help="truth: publish every robot's true Pose (agents on truth); pf: "
+                        "only Truth for the report, the localizer gives the poses from "
+                        "the LMS bridge's scans, and the run waits for it (truth)")
     add_epoch_arg(p)
     add_session_args(p)
     return p
@@ -113,7 +123,9 @@ class HilWorld(WorldShell):
     behind emulated devices."""
 
     def __init__(self, args: argparse.Namespace, world: World, session: zenoh.Session) -> None:
-        super().__init__(args, world, session, localization="truth", realtime=True)
+        pf = args.localization == "pf"
+        super().__init__(args, world, session, localization=args.localization, realtime=True,
+                         localizer=pf)
         keys = self.keys
         self.lock = threading.Lock()  # the World, between physics and the laser thread
         self.spec = MODELS["create"]
@@ -135,11 +147,22 @@ class HilWorld(WorldShell):
         self.running = False
         self.dropped = 0
         self.pub_truth = declare_publisher(session, keys.truth())
-        self.pub_pose = [declare_publisher(session, keys.pose(i)) for i in range(self.n)]
+        self.pub_pose = ([] if pf else
+                         [declare_publisher(session, keys.pose(i)) for i in range(self.n)])
+        # the robots' true poses over the last few physics steps, for the laser: the
+        # emulated LMS measures as a real one does, over its sweep before its telegram
+        self.history: collections.deque[tuple[float, list[tuple[float, float]]]] = (
+            collections.deque(maxlen=HISTORY_STEPS))
 
     def _ranges(self) -> list[float]:
+        """The robots as the laser saw them at its sweep's middle, half its two mirror
+        turns (0.5 degrees interlaced at 75 Hz) before its telegram begins: the physics
+        step nearest that time."""
+        seen_at = time.monotonic() - SWEEP_MIDDLE_S
         with self.lock:
             robots = [self.world.truth(i)[:2] for i in range(self.n)]
+            if self.history:
+                robots = min(self.history, key=lambda h: abs(h[0] - seen_at))[1]
         return scan_ranges(self.laser, self.bearings, robots, ROBOT_RADIUS_M,
                            self.geometry.range_max_m)
 
@@ -168,6 +191,8 @@ class HilWorld(WorldShell):
             cmds[i] = (0.5 * (right + left), (right - left) / wb)
         with self.lock:
             self.world.step(cmds, dt)
+            self.history.append((time.monotonic(),
+                                 [self.world.truth(i)[:2] for i in range(self.n)]))
         for i, emu in enumerate(self.creates):
             r = self.world.sense(i)
             with emu.lock:
@@ -181,7 +206,7 @@ class HilWorld(WorldShell):
         with self.lock:
             poses = [self.world.truth(i) for i in range(self.n)]
         self.pub_truth.put(encode(Truth.of_team(t, k, poses)))
-        for i, (x, y, th) in enumerate(poses):
+        for i, (x, y, th) in enumerate(poses if self.pub_pose else ()):
             self.pub_pose[i].put(encode(Pose(t, k, i, x, y, th)))
 
     def respond(self) -> None:

@@ -22,7 +22,7 @@ from hwbridge.common import add_epoch_arg, on_stop, parse_floats
 from hwbridge.lms.codec import UNIT_MM
 from hwbridge.lms.model import ScanGeometry
 from hwbridge.lms_driver import LmsDriver, LmsError
-from hwbridge.runclock import RunClock
+from hwbridge.runclock import RunClock, tick_holding
 from hwbridge.transport import PortError
 from wire import Keys, Scan, encode
 from wire.session import (
@@ -50,9 +50,31 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--pose", default=f"3,-2,{math.pi / 2!r}", metavar="X,Y,THETA",
                    help="scanner pose in the edge's frame, m and rad (default 3,-2,pi/2: "
                         "1 m behind the start line, centred on a 6 m edge, facing the ice)")
+    p.add_argument("--dt", type=float, default=0.1,
+                   help="control period, s (0.1): a scan's tick is the one whose period "
+                        "holds its measurement time")
     add_epoch_arg(p)
     add_session_args(p)
     return p
+
+
+# The LMS 2xx's mirror turns at 75 Hz; a 0.5 degree scan interlaces two turns at 1 degree
+# (0.25 degree: four, 100 degrees only), and the telegram goes out once the scan is
+# done (LMS 200/211/221/291 Telegram Listing; sicktoolbox's SickLMS2xx). So a scan's
+# middle is half its turns before its telegram's first byte.
+TURN_S = 1.0 / 75.0
+TURNS = {100: 1, 50: 2, 25: 4}  # by resolution in hundredths of a degree
+BITS_PER_BYTE = 10  # 8N1: a start and a stop bit
+
+
+def measured_times(t_now: float, count: int, telegram_bytes: int, baud: int,
+                   resolution_cdeg: int) -> list[float]:
+    """When each of ``count`` scans read at ``t_now`` was measured (the middle of its
+    sweep): the last one's telegram ended now, each earlier one a telegram's line time
+    before the next."""
+    line_s = BITS_PER_BYTE * telegram_bytes / baud
+    middle_s = 0.5 * TURNS[resolution_cdeg] * TURN_S
+    return [t_now - (count - j) * line_s - middle_s for j in range(count)]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -79,7 +101,6 @@ def main(argv: list[str] | None = None) -> int:
         stopping = True
 
     began = time.monotonic()
-    k = 0
     with bounded_session(options_from_args(args), "btrack bridge") as session:
         pub = declare_publisher(session, keys.scan())
         on_stop(stop)
@@ -89,12 +110,14 @@ def main(argv: list[str] | None = None) -> int:
                 scans = driver.poll(now)
                 if not driver.transport.is_open:
                     time.sleep(0.01)  # port down: the reopen backoff paces the retries
-                for ranges in scans:
+                times = measured_times(clock.t(now), len(scans), driver.telegram_bytes,
+                                       driver.transport.baud, geometry.resolution_centideg)
+                for ranges, t in zip(scans, times, strict=True):
+                    t = max(0.0, t)
                     pub.put(encode(Scan(
-                        t=clock.t(now), k=k, ranges=ranges, scanner_x=x, scanner_y=y,
-                        scanner_theta=theta, angle_min=geometry.angle_min,
+                        t=t, k=tick_holding(t, args.dt), ranges=ranges, scanner_x=x,
+                        scanner_y=y, scanner_theta=theta, angle_min=geometry.angle_min,
                         angle_step=geometry.angle_step, range_max=driver.range_max_m)))
-                    k += 1
         finally:
             driver.close()
     wall = time.monotonic() - began

@@ -37,6 +37,8 @@ class LmsError(Exception):
     """The sensor does not answer as an LMS 2xx should."""
 
 
+FRAME_BYTES = 7  # a telegram's STX, address, length, command and CRC
+
 class LmsDriver:
     def __init__(self, port: str, baud: int = 38400,
                  geometry: ScanGeometry | None = None) -> None:
@@ -48,6 +50,7 @@ class LmsDriver:
         self.transport = SerialTransport(port, lms.POWER_UP_BAUD)
         self.parser = lms.TelegramParser(expect_reply=True)
         self.scans = 0
+        self.telegram_bytes = 0  # the last scan's telegram, framing included
         self.bad_scans = 0
         self.fatal_scans = 0  # dropped: the sensor's status said "fatal error"
         self.partial_scans = 0  # dropped: one pass of an interlaced scan, not a scan
@@ -198,6 +201,8 @@ class LmsDriver:
                             scan.unit, self.config.units)
             out.append(lms.values_to_ranges(scan.values, self.config))
             self.scans += 1
+            # STX, address, length (2), command, the data, CRC (2): for its line time
+            self.telegram_bytes = FRAME_BYTES + len(item.data)
         return out
 
     def close(self) -> None:

@@ -10,6 +10,7 @@ neighbours' states of tick k - 1. Only process shells use this; cores get ``t`` 
 
 from __future__ import annotations
 
+import math
 import time
 
 
@@ -32,3 +33,9 @@ class RunClock:
 def tick_of(t: float, dt: float) -> int:
     """The control tick at run time ``t``: every process of a run counts the same k."""
     return int(t // dt)
+
+
+def tick_holding(t: float, dt: float) -> int:
+    """The tick whose period ((k - 1) dt, k dt] holds a measurement taken at ``t`` (a
+    laser scan): its sensing carries the odometry up to the measurement."""
+    return max(0, math.ceil(t / dt - 1e-6))

@@ -26,7 +26,8 @@ from typing import Any
 import numpy as np
 import zenoh
 
-from localizer.core import FilterConfig, Localizer, ScanGeometry
+from localizer.core import Estimate, FilterConfig, Localizer, ScanGeometry
+from localizer.timeline import OdometryTimeline, advance
 from wire import DecodeError, Keys, Particles, Pose, Scan, Sense, decode, encode
 from wire.messages import MAX_CLOUD
 from wire.session import add_session_args, declare_publisher, open_session, options_from_args
@@ -61,6 +62,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"particles in each published sample (200, at most {MAX_CLOUD})")
     p.add_argument("--sense-timeout", type=float, default=0.5,
                    help="wall seconds to wait for a robot's sensing of a scanned tick (0.5)")
+    p.add_argument("--timing", choices=["tick", "measured"], default="tick",
+                   help="tick: one scan per control tick, on it (the simulator); measured: "
+                   "scans at the laser's own rate, each at its measurement time (a real "
+                   "LMS): the filter is moved to each scan's time by the odometry, and "
+                   "every robot gets a pose on every sensing tick, the estimate carried "
+                   "forward by its odometry (tick)")
     add_session_args(p)
     return p
 
@@ -202,6 +209,118 @@ class LocalizerNode:
         self.token.undeclare()
 
 
+class MeasuredTimingNode(LocalizerNode):
+    """``--timing measured``: scans come when the laser sends them, stamped with their
+    measurement time, not one per tick (``localizer.timeline``). A scan is taken in
+    once every robot's odometry up to its time is in (or after ``sense_timeout``),
+    scans in time order; a pose goes out for every tick whose sensing is in, from the
+    latest estimate carried forward by the odometry since its scan."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.dt: float | None = None
+        self.timeline: OdometryTimeline | None = None
+        self.pending: list[Scan] = []  # scans not yet taken in, by time
+        self.estimates: list[Estimate] | None = None
+        self.sensed: dict[int, set[int]] = {}  # tick -> robots whose sensing is in
+        self.sensed_at: dict[int, float] = {}  # tick -> when its first sensing came
+        self.last_pose_k = -1
+        self.scan_seen: dict[int, float] = {}  # id of a pending scan -> when it came
+        self.stale_scans = 0  # measured before a scan already taken in
+
+    def _handle(self, kind: str, data: tuple[str, bytes]) -> None:
+        key, payload = data
+        try:
+            if kind == "scan":
+                scan = decode(Scan, payload)
+                if scan.scanners != 1:
+                    raise DecodeError("measured timing takes one scanner")
+                self.pending.append(scan)
+                self.pending.sort(key=lambda s: s.t)
+                self.scan_seen[id(scan)] = time.monotonic()
+                return
+            sense = decode(Sense, payload)
+            if sense.robot != Keys.robot_of(key):
+                raise DecodeError(f"sense of robot {sense.robot} on {key}")
+            if sense.robot >= self.n:
+                raise DecodeError(f"robot {sense.robot} outside a team of {self.n}")
+            if self.timeline is None:  # the filter starts at the first sensing's period
+                self.dt = sense.dt
+                self.timeline = OdometryTimeline(self.n, at=float(sense.k - 1))
+            taken = self.timeline.add(sense.k, sense.robot, sense.odom_dist_m,
+                                      sense.odom_dtheta)
+            if taken and sense.k > self.last_pose_k:  # else too late for its tick's pose
+                self.sensed.setdefault(sense.k, set()).add(sense.robot)
+                self.sensed_at.setdefault(sense.k, time.monotonic())
+        except DecodeError as exc:
+            self._drop(key, str(exc))
+
+    def _ready(self, now: float) -> int | None:
+        return None  # ``step`` below decides
+
+    def step(self, now: float) -> None:
+        tl, dt = self.timeline, self.dt
+        if tl is None or dt is None:
+            return
+        while self.pending:
+            scan = self.pending[0]
+            until = scan.t / dt
+            if until < tl.at:
+                self.pending.pop(0)
+                self.scan_seen.pop(id(scan), None)
+                self.stale_scans += 1
+                continue
+            waited = now - self.scan_seen.get(id(scan), now)
+            if not tl.complete(until) and waited < self.sense_timeout:
+                break
+            self.pending.pop(0)
+            self.scan_seen.pop(id(scan), None)
+            dist, dtheta = tl.take(until)
+            began = time.perf_counter()
+            self.estimates = self.core.step_scans(
+                [(np.asarray(scan.ranges), ScanGeometry.of(scan))], dist, dtheta)
+            self.update_s += time.perf_counter() - began
+            self.scans_done += 1
+        for k in sorted(self.sensed):
+            whole = len(self.sensed[k]) == self.n
+            if not whole and now - self.sensed_at[k] < self.sense_timeout:
+                break
+            if not whole:
+                self.late += 1
+            self._pose(k)
+
+    def _pose(self, k: int) -> None:
+        tl, dt = self.timeline, self.dt
+        assert tl is not None and dt is not None
+        self.sensed.pop(k, None)
+        self.sensed_at.pop(k, None)
+        self.last_pose_k = k
+        if self.estimates is None:
+            return  # no scan yet: no pose
+        motions = tl.ahead(float(k))
+        for i, e in enumerate(self.estimates):
+            x, y, theta = advance(e.x, e.y, e.theta, [(float(m[i, 0]), float(m[i, 1]))
+                                                      for m in motions])
+            self.pub_pose[i].put(encode(Pose(k * dt, k, i, x, y, theta,
+                                             [e.var_x, e.var_y, e.var_theta], "pf")))
+
+    def run(self) -> None:
+        while not self.stopping:
+            try:
+                kind, data = self.events.get(timeout=0.02)
+                if kind == "stop":
+                    break
+                self._handle(kind, data)
+                while True:
+                    kind, data = self.events.get_nowait()
+                    if kind == "stop":
+                        return
+                    self._handle(kind, data)
+            except queue.Empty:
+                pass
+            self.step(time.monotonic())
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.robots < 1:
@@ -219,9 +338,9 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     opts = options_from_args(args)
     with open_session(opts) as session:
-        node = LocalizerNode(session, Keys(opts.ns), args.robots, config, args.seed,
-                             args.sense_timeout, args.clouds_every, args.cloud_size,
-                             args.scanners)
+        cls = MeasuredTimingNode if args.timing == "measured" else LocalizerNode
+        node = cls(session, Keys(opts.ns), args.robots, config, args.seed,
+                   args.sense_timeout, args.clouds_every, args.cloud_size, args.scanners)
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, lambda *_: node.stop())
         try:
@@ -232,7 +351,8 @@ def main(argv: list[str] | None = None) -> int:
             print(json.dumps({
                 "localizer": True, "scans": node.scans_done, "dropped": node.dropped,
                 "late": node.late, "resampled": node.core.resampled,
-                "reseeded": node.core.reseeded,
+                "reseeded": node.core.reseeded, "timing": args.timing,
+                "stale_scans": getattr(node, "stale_scans", 0),
                 "update_ms_mean": None if mean_ms is None else round(mean_ms, 3),
             }), flush=True)
     return 0

@@ -10,6 +10,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from tests.procutil import end_children_of_run
 
 
@@ -34,8 +36,21 @@ def test_sim_hil_short_run(tmp_path: Path) -> None:
     # the recording names the map in full, so the report (or a rerun) rebuilds it
     from report.load import load_run
 
-    info = load_run(out).info
+    run = load_run(out)
+    info = run.info
     assert info["map"].startswith("procedural:7,length=5") and "edge=" in info["map"]
     for i in range(3):
         agent = json.loads((out / "logs" / f"agent{i}.out").read_text().splitlines()[-1])
         assert agent["ticks"] > 10  # the agents ran on the bridges' sensing
+    # ... and on the particle filter's poses from the LMS bridge's scans, at their
+    # measured times (issue 23, item 1); the world sent only Truth
+    assert info["localization"] == "pf"
+    localizer = json.loads((out / "logs" / "localizer.out").read_text().splitlines()[-1])
+    assert localizer["timing"] == "measured" and localizer["scans"] >= 10
+    for i in range(3):
+        truth, pose = run.truth[i], run.poses[i]
+        at = np.searchsorted(truth.t, pose.t).clip(0, truth.t.size - 1)
+        near = np.abs(truth.t[at] - pose.t) < 1e-6
+        assert near.sum() > 10
+        err = np.hypot(pose.x[near] - truth.x[at][near], pose.y[near] - truth.y[at][near])
+        assert np.median(err) < 0.05, (i, np.median(err))

@@ -118,7 +118,6 @@ HIL_REFUSED = {
     "kidnap": ["--kidnap", "1@2:0.1,0"],
     "odom_noise": ["--odom-noise", "0.1"],
     "odom_turn_noise": ["--odom-turn-noise", "0.1"],
-    "localization": ["--localization", "pf"],
     "boot_s": ["--boot-s", "2"],
     "scanners": ["--scanners", "2"],
     "clouds_every": ["--clouds-every", "5"],
@@ -144,6 +143,7 @@ HIL_PLANNED = {
     "quiet": ["--quiet"],
     "progress_every": ["--progress-every", "3"],
     "hil_faults": ["--hil-faults", "0.1"],
+    "localization": ["--localization", "truth"],
 }
 HIL_ITSELF = {
     "hil": "the mode",
@@ -192,12 +192,20 @@ def test_an_option_the_hardware_loop_follows_changes_its_plan(tmp_path, dest):
     assert hil.plan(given, 1.0e9) != hil.plan(base, 1.0e9)
 
 
-def test_truth_poses_are_what_the_hardware_loop_runs_on(tmp_path):
-    args = _hil_args(tmp_path, "--localization", "truth")
-    assert launcher.hil_refusal(args) is None
-    for other in ("pf", "odometry"):
-        assert "--localization " + other in (
-            launcher.hil_refusal(_hil_args(tmp_path, "--localization", other)) or "")
+def test_the_hardware_loop_runs_on_the_filter_or_on_truth_never_on_dead_reckoning(tmp_path):
+    from hwbridge import hil
+
+    for given in ((), ("--localization", "pf")):
+        args = _hil_args(tmp_path, *given)
+        assert launcher.hil_refusal(args) is None
+        commands = hil.plan(args, 1.0e9).commands
+        assert commands["localizer"][:2] == ["localizer", "--robots"]
+        assert "measured" in commands["localizer"]
+    truth = hil.plan(_hil_args(tmp_path, "--localization", "truth"), 1.0e9).commands
+    assert "localizer" not in truth
+    assert truth["hil-world"][truth["hil-world"].index("--localization") + 1] == "truth"
+    assert "--localization odometry" in (
+        launcher.hil_refusal(_hil_args(tmp_path, "--localization", "odometry")) or "")
 
 
 def test_unstable_gains_are_refused_before_the_hardware_loop_starts(tmp_path, capsys):

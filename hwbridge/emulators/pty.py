@@ -268,11 +268,23 @@ class LmsEmulator(_Emulator):
         line_free = time.monotonic()  # when the line has sent what we wrote
         next_scan = time.monotonic()
         pending: collections.deque[tuple[float, bytes, int | None]] = collections.deque()
+        # A scan's telegram reaches the host whole only once its last byte has crossed
+        # the line, its line time after the scan: a pty passes bytes at once, so it is
+        # held until then (the host stamps a scan's time from its arrival).
+        on_line: collections.deque[tuple[float, bytes]] = collections.deque()
         while not self._stop.is_set():
             now = time.monotonic()
+            while on_line and now >= on_line[0][0]:
+                if self.port.plugged:
+                    self._send(on_line.popleft()[1])
+                    self.scans += 1
+                else:
+                    on_line.popleft()
             wait = max(0.0, min(0.02, next_scan - now)) if self.device.continuous else 0.02
             if pending:
                 wait = max(0.0, min(wait, pending[0][0] - now))
+            if on_line:
+                wait = max(0.0, min(wait, on_line[0][0] - now))
             data = self._hear(self.port.read(wait))
             if data:
                 self.bytes_in += len(data)
@@ -299,8 +311,6 @@ class LmsEmulator(_Emulator):
                 with self.lock:
                     tel = self.device.values_telegram()
                     baud = self.device.baud
-                if self.port.plugged:
-                    self._send(tel)
-                    self.scans += 1
                 line_free = now + len(tel) * 10.0 / baud
+                on_line.append((line_free, tel))
                 next_scan = now + LMS_SCAN_S
