@@ -121,6 +121,7 @@ HIL_REFUSED = {
     "localization": ["--localization", "pf"],
     "boot_s": ["--boot-s", "2"],
     "scanners": ["--scanners", "2"],
+    "sensors": ["--sensors", "lab"],
     "clouds_every": ["--clouds-every", "5"],
     "live": ["--live"],
 }
