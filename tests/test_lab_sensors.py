@@ -174,7 +174,7 @@ def test_wheel_slip_odometry_over_reports() -> None:
 def test_no_slip_world_is_unchanged() -> None:
     gmap = builtin_map("half-algae")
     a, b = World(gmap, 3, seed=4), World(gmap, 3, seed=4, slip=None)
-    for k in range(20):
+    for _ in range(20):
         cmds = {i: (0.3, 0.1 * i) for i in range(3)}
         a.step(cmds, 0.1)
         b.step(cmds, 0.1)
