@@ -83,6 +83,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scanners", type=int, metavar="N",
                    help="with pf: laser scanners in a row behind the team, each watching "
                    "its share of the edge (default one per 10 m of edge)")
+    p.add_argument("--sensors", choices=["ideal", "lab"],
+                   help="sensor profile: ideal (the default: the simulator's ideal laser and "
+                   "sensors) or lab (the LMS's bias, noise, mixed pixels, jitter and sweep, a "
+                   "Create's outline, clutter and a walking person, noisy late ice and algae "
+                   "sensors with a dead band, wheel slip; the localizer set for a real LMS)")
     p.add_argument("--clouds-every", type=int, metavar="N",
                    help="with pf: every N ticks the localizer publishes a sample of each "
                    "robot's particles, which the recording keeps and Foxglove draws")
@@ -284,7 +289,7 @@ def fail(group: ProcessGroup, child: Child, what: str, name: str = "btrack sim")
 # What the hardware loop (--hil) does not do yet: refused by name there, never ignored.
 HIL_REFUSED = (("fault", "--fault"), ("chaos", "--chaos"), ("kidnap", "--kidnap"),
                ("odom_noise", "--odom-noise"), ("odom_turn_noise", "--odom-turn-noise"),
-               ("scanners", "--scanners"),
+               ("scanners", "--scanners"), ("sensors", "--sensors"),
                ("live", "--live"), ("clouds_every", "--clouds-every"))
 
 
@@ -460,6 +465,7 @@ def run(args: argparse.Namespace) -> int:
                 vital.append(group.start("localizer", [
                     "localizer", "--robots", str(bodies), "--seed", str(args.seed),
                     "--scanners", str(_scanners(args)),
+                    *(["--sensors", args.sensors] if args.sensors else []),
                     *(["--clouds-every", str(args.clouds_every)] if args.clouds_every else []),
                     *member]))
             if schedule and not args.quiet:
@@ -481,6 +487,8 @@ def run(args: argparse.Namespace) -> int:
             world_args += forward_flags(args, ODOM_FLAGS)
             if args.scanners is not None:
                 world_args += ["--scanners", str(args.scanners)]
+            if args.sensors:
+                world_args += ["--sensors", args.sensors]
             world = group.start("world", world_args)
             code = _watch(args, group, monitor, world, injector, recorder, vital)
             if code:

@@ -72,6 +72,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="wheel odometry noise for every case, as for btrack sim")
     p.add_argument("--odom-turn-noise", type=non_negative, metavar="F",
                    help="odometry turn noise for every case, as for btrack sim")
+    p.add_argument("--sensors", choices=["ideal", "lab"],
+                   help="sensor profile for every case, as for btrack sim (default ideal)")
     p.add_argument("--engine", choices=("bus", "inprocess"), default="bus",
                    help="bus: each case a full btrack sim team of processes; inprocess: each "
                    "in one process, the same cores bit for bit, in seconds (truth or "
@@ -93,6 +95,8 @@ def _sim_args(args: argparse.Namespace, case: Case) -> list[str]:
         out += ["--localization", args.localization]
     if args.config:
         out += ["--config", args.config]
+    if args.sensors:
+        out += ["--sensors", args.sensors]
     return out + forward_flags(args, ODOM_FLAGS)
 
 
@@ -229,6 +233,10 @@ def main(argv: list[str] | None = None) -> int:
 
         return general(argv[1:])
     args = build_parser().parse_args(argv)
+    if args.engine == "inprocess" and args.sensors == "lab":
+        print("btrack suite: --sensors lab runs on the bus only (the in-process engine "
+              "has the ideal sensors): use --engine bus", file=sys.stderr)
+        return 2
     if args.engine == "inprocess" and args.localization not in (None, "truth", "odometry"):
         print("btrack suite: --engine inprocess takes truth or odometry poses (pf runs the "
               "localizer process: use --engine bus)", file=sys.stderr)

@@ -12,16 +12,21 @@ from scipy.optimize import linear_sum_assignment
 
 
 def assign(predicted: np.ndarray, candidates: np.ndarray, active: np.ndarray,
-           gate_m: float) -> np.ndarray:
+           gate_m: float | np.ndarray) -> np.ndarray:
     """For each robot, the index of its measured centre, or -1: minimum total squared
-    distance over robots in ``active``, each pair gated at ``gate_m``."""
+    distance over robots in ``active``, each pair gated at ``gate_m`` (one gate, or one
+    per candidate)."""
     out = np.full(predicted.shape[0], -1, dtype=int)
     rows = np.flatnonzero(active)
     if rows.size == 0 or candidates.shape[0] == 0:
         return out
     d2 = ((predicted[rows, None, :] - candidates[None, :, :]) ** 2).sum(axis=2)
     big = 1e6
-    cost = np.where(d2 <= gate_m * gate_m, d2, big)
+    if np.ndim(gate_m):
+        gates = np.asarray(gate_m, dtype=float)[None, :]
+        cost = np.where(d2 <= gates * gates, d2, big)
+    else:
+        cost = np.where(d2 <= gate_m * gate_m, d2, big)
     r_idx, c_idx = linear_sum_assignment(cost)
     ok = cost[r_idx, c_idx] < big
     out[rows[r_idx[ok]]] = c_idx[ok]

@@ -51,12 +51,15 @@ import numpy as np
 from agent.phase import wrap_pi_array
 from localizer.associate import Recovery, assign, recovery, still_blobs
 from localizer.measure import (  # noqa: F401  (the measurement's API, re-exported)
+    Blobs,
     ScanGeometry,
     blob_centre,
     blob_points,
     blob_spans,
     fit_circle,
+    measure_blobs,
     measure_centres,
+    merge_blobs,
     merge_centres,
     nearest_return_centre,
     split_blobs,
@@ -85,6 +88,18 @@ class FilterConfig:
     reseed_heading_std_rad: float = 0.2  # around the filter's own heading
     reseed_uniform_frac: float = 0.2  # of re-seeded particles with any heading
     refine: bool = True  # fit a circle to the blob after the thesis's estimate
+    # --- for a real LMS (``FilterConfig.lab()``); the defaults are the ideal scan's ------
+    blobs: bool = False  # measure with ``measure_blobs`` (the fields below); else as always
+    median3: bool = False  # median-filter each scan over three beams (spikes, dropouts)
+    trim_edges: int = 0  # returns dropped at each end of a blob (mixed pixels)
+    full_chord_m: float = 0.0  # a blob this wide saw a robot whole: only such start tracks
+    partial_gate_m: float = 0.25  # a narrower blob is a robot's only this close to it
+    rotation_s: float = 0.0  # the LMS's mirror turn, s (0: every beam at the scan's time)
+    interlace: int = 1  # turns per scan (2 at 0.5 degree)
+    # the robot's outline, when it is not the circle of ``radius_m``: a body of
+    # ``body_radius_m`` behind, a bumper of ``bumper_radius_m`` in front (0: a circle)
+    body_radius_m: float = 0.0
+    bumper_radius_m: float = 0.0
 
     def __post_init__(self) -> None:
         if self.particles < 2:
@@ -93,6 +108,24 @@ class FilterConfig:
             raise ValueError("radius, measurement std and gate must be positive")
         if not 0.0 < self.resample_below <= 1.0:
             raise ValueError("resample_below must be in (0, 1]")
+        if self.trim_edges < 0 or self.interlace < 1 or self.rotation_s < 0:
+            raise ValueError("trim_edges >= 0, interlace >= 1 and rotation_s >= 0")
+
+    @classmethod
+    def lab(cls, **overrides: object) -> FilterConfig:
+        """The configuration for a real SICK LMS 2xx (``btrack sim --sensors lab``): scans
+        median-filtered, a blob's edge returns (mixed pixels) left out of the fit, a tighter
+        fit, partial blobs only close to a robot's prediction and never starting a track
+        (a person's leg, a table leg), and each centre moved to the scan's time by the
+        robot's odometry (the LMS's 75 Hz mirror, two interlaced turns at 0.5 degree:
+        Player's sicklms200 documentation)."""
+        values: dict[str, object] = dict(blobs=True, median3=True, trim_edges=1,
+                                          fit_rms_m=0.012, full_chord_m=0.22,
+                                          partial_gate_m=0.06, rotation_s=1.0 / 75.0,
+                                          interlace=2, body_radius_m=0.165,
+                                          bumper_radius_m=0.172)
+        values.update(overrides)
+        return cls(**values)  # type: ignore[arg-type]
 
 
 @dataclass(frozen=True)
@@ -263,14 +296,17 @@ class Localizer:
         return self.step_scans([(ranges, geometry)], dist, dtheta)
 
     def step_scans(self, scans: Sequence[tuple[np.ndarray, ScanGeometry]],
-                   dist: np.ndarray, dtheta: np.ndarray) -> list[Estimate]:
+                   dist: np.ndarray, dtheta: np.ndarray, dt: float = 0.0) -> list[Estimate]:
         """``step`` for one tick seen by a row of scanners: the centres of every scan,
-        one per robot where two scanners see the same robot (``merge_centres``)."""
+        one per robot where two scanners see the same robot (``merge_centres``). ``dt``
+        is the odometry's period (with ``config.blobs``, for each robot's speed)."""
         if not scans:
             raise ValueError("a tick needs at least one scan")
         if not self.drawn:
             self.draw_over_view([g for _, g in scans])
         self.predict(dist, dtheta)
+        if self.config.blobs:
+            return self._step_blobs(scans, np.asarray(dist, dtype=float), dt)
         centres = merge_centres([measure_centres(r, g, self.config) for r, g in scans],
                                 self.config.radius_m)
         match = assign(self.mean_positions(), centres, self.started, self.config.gate_m)
@@ -285,6 +321,63 @@ class Localizer:
         self._recent_motion.append(np.abs(np.asarray(dist, dtype=float)))
         self.recover(centres, used)
         return self.estimates(has)
+
+    def _step_blobs(self, scans: Sequence[tuple[np.ndarray, ScanGeometry]],
+                    dist: np.ndarray, dt: float) -> list[Estimate]:
+        """The measure-assign-update-recover of ``step_scans`` on ``measure_blobs``: a
+        partial blob is a robot's only within ``partial_gate_m`` of its prediction and
+        never re-seeds one; an assigned centre is moved from its returns' mean time to
+        the scan's along the robot's heading at its odometry's speed."""
+        c = self.config
+        blobs = merge_blobs([measure_blobs(r, g, c) for r, g in scans], c.radius_m)
+        centres = blobs.centres
+        gates = np.where(blobs.full, c.gate_m, min(c.partial_gate_m, c.gate_m))
+        predicted = self.mean_positions()
+        match = assign(predicted, centres, self.started, gates)
+        has = match >= 0
+        z = np.zeros((self.robots, 2))
+        z[has] = centres[match[has]]
+        if dt > 0 and has.any():
+            heading = np.arctan2((self.w * np.sin(self.theta)).sum(axis=1),
+                                 (self.w * np.cos(self.theta)).sum(axis=1))
+            ahead = -blobs.tau[match[has]] * dist[has] / dt  # metres since the returns
+            z[has, 0] += ahead * np.cos(heading[has])
+            z[has, 1] += ahead * np.sin(heading[has])
+        if c.body_radius_m > 0 and has.any():
+            self._outline(z, has, scans)
+        self.update(z, has)
+        self.missed = np.where(has, 0, self.missed + 1)
+        used = ~blobs.full.copy()  # a partial blob starts no track
+        used[match[has]] = True
+        self._recent_centres.append(centres)
+        self._recent_motion.append(np.abs(dist))
+        self.recover(centres, used)
+        return self.estimates(has)
+
+    def _outline(self, z: np.ndarray, has: np.ndarray,
+                 scans: Sequence[tuple[np.ndarray, ScanGeometry]]) -> None:
+        """Centres fitted with a circle of ``radius_m`` to a Create's outline, moved to
+        the outline's: the side a scanner sees is the bumper's (in front), the body's
+        (behind) or some of each, and a smaller radius seen puts the fitted circle's
+        centre that much farther than the robot's along the line of sight."""
+        c = self.config
+        heading = np.arctan2((self.w * np.sin(self.theta)).sum(axis=1),
+                             (self.w * np.cos(self.theta)).sum(axis=1))
+        rows = np.flatnonzero(has)
+        for i in rows.tolist():
+            near = min(scans, key=lambda s: float(np.hypot(z[i, 0] - s[1].x, z[i, 1] - s[1].y)))
+            g = near[1]
+            lx, ly = z[i, 0] - g.x, z[i, 1] - g.y
+            d = math.hypot(lx, ly)
+            if d <= 0:
+                continue
+            to_scanner = math.atan2(-ly, -lx)
+            off = abs(math.remainder(float(heading[i]) - to_scanner, 2.0 * math.pi))
+            front = 1.0 - off / math.pi  # share of the arc seen that is the bumper
+            seen = c.body_radius_m + (c.bumper_radius_m - c.body_radius_m) * front
+            shift = c.radius_m - seen
+            z[i, 0] -= shift * lx / d
+            z[i, 1] -= shift * ly / d
 
     def cloud(self, size: int) -> list[tuple[list[float], list[float]]]:
         """Every robot's particles, ``size`` of them taken evenly (for viewers): (x, y)

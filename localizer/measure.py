@@ -217,3 +217,113 @@ def merge_centres(per_scan: Sequence[np.ndarray], radius: float) -> np.ndarray:
         merged = np.vstack([merged, centres])
         counts = np.concatenate([counts, np.ones(centres.shape[0])])
     return merged
+
+
+# --- the lab's scans: spikes, mixed pixels, partial robots and the sweep's timing ----------
+
+
+def median3(ranges: np.ndarray) -> np.ndarray:
+    """Each range replaced by the median of itself and its two neighbours (the ends kept):
+    an isolated spurious return or dropout inside a robot's arc is gone, a step (a
+    silhouette edge) stays where it is."""
+    r = np.asarray(ranges, dtype=float)
+    if r.size < 3:
+        return r.copy()
+    out = r.copy()
+    out[1:-1] = np.median(np.stack([r[:-2], r[1:-1], r[2:]]), axis=0)
+    return out
+
+
+def sweep_offsets(beams: int, rotation_s: float, interlace: int) -> np.ndarray:
+    """When each beam of an LMS 2xx scan is measured, relative to the scan's time (its
+    last beam), s: the mirror turns once per ``rotation_s`` and sweeps the 180 degrees in
+    half a turn; at 0.5 degree two turns interlace (even beams in the first, odd in the
+    second). From the device's timing, as the driver knows it."""
+    j = np.arange(beams)
+    span = (interlace - 1) * rotation_s + 0.5 * rotation_s
+    return -span + (j % interlace) * rotation_s + j / max(beams - 1, 1) * 0.5 * rotation_s
+
+
+@dataclass(frozen=True)
+class Blobs:
+    """The robot-shaped blobs of one tick: centre, whether the robot was seen whole (a
+    blob as wide as a robot: only such blobs may start or re-seed a track), and the mean
+    time of the returns fitted, relative to the scan's (s, <= 0)."""
+
+    centres: np.ndarray  # (m, 2)
+    full: np.ndarray  # (m,) bool
+    tau: np.ndarray  # (m,)
+
+
+def measure_blobs(ranges: np.ndarray, geometry: ScanGeometry, config: FilterConfig) -> Blobs:
+    """``measure_centres`` for a real LMS: the scan median-filtered first
+    (``config.median3``), ``config.trim_edges`` returns dropped at each end of a blob
+    before the circle fit (the mixed pixels of a silhouette edge), the fit's worst
+    return dropped and the fit repeated when it lies over three times the RMS out, and
+    each blob flagged full (its chord at least ``config.full_chord_m``) and timed."""
+    r = median3(ranges) if config.median3 else np.asarray(ranges, dtype=float)
+    starts, ends = blob_spans(r, geometry, config.jump_m)
+    times = sweep_offsets(r.size, config.rotation_s, config.interlace)
+    centres, full, tau = [], [], []
+    trim = config.trim_edges
+    for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
+        beams = np.arange(a, b)
+        pts_all = blob_points(r, geometry, beams)
+        chord = float(np.hypot(*(pts_all[-1] - pts_all[0])))
+        if chord > 2.0 * config.radius_m + config.width_margin_m:
+            continue
+        if beams.size - 2 * trim >= config.min_returns:
+            beams = beams[trim:beams.size - trim]
+        if beams.size < config.min_returns:
+            continue
+        centre = _robust_fit(r, geometry, beams, config)
+        if centre is None:
+            continue
+        fitted, used = centre
+        centres.append(fitted)
+        full.append(chord >= config.full_chord_m)
+        tau.append(float(times[used].mean()))
+    if not centres:
+        return Blobs(np.empty((0, 2)), np.empty(0, dtype=bool), np.empty(0))
+    return Blobs(np.array(centres), np.array(full, dtype=bool), np.array(tau))
+
+
+def _robust_fit(r: np.ndarray, geometry: ScanGeometry, beams: np.ndarray,
+                config: FilterConfig) -> tuple[np.ndarray, np.ndarray] | None:
+    """The circle fit of ``blob_centre`` on ``beams``, once more without the worst return
+    if it is an outlier; None if the blob is no robot."""
+    pts = blob_points(r, geometry, beams)
+    near = int(beams[np.argmin(r[beams])])
+    reach = float(r[near]) + config.radius_m
+    mid = geometry.theta + geometry.angle_min + geometry.angle_step * 0.5 * (beams[0] + beams[-1])
+    start = np.array([geometry.x + reach * math.cos(mid), geometry.y + reach * math.sin(mid)])
+    fitted, rms = fit_circle(pts, config.radius_m, start)
+    res = np.abs(np.hypot(*(pts - fitted).T) - config.radius_m)
+    worst = int(np.argmax(res))
+    if beams.size > config.min_returns and res[worst] > 3.0 * max(rms, 1e-4) and rms > 0.003:
+        keep = np.ones(beams.size, dtype=bool)
+        keep[worst] = False
+        beams, pts = beams[keep], pts[keep]
+        fitted, rms = fit_circle(pts, config.radius_m, start)
+    if rms > config.fit_rms_m or np.hypot(*(fitted - start)) > config.radius_m:
+        return None
+    return fitted, beams
+
+
+def merge_blobs(per_scan: Sequence[Blobs], radius: float) -> Blobs:
+    """``merge_centres`` for ``Blobs``: one blob per robot across a row of scanners, full
+    if any scanner saw it whole, timed as the mean of its scanners'."""
+    if len(per_scan) == 1:
+        return per_scan[0]
+    centres = merge_centres([b.centres for b in per_scan], radius)
+    every = [b for b in per_scan if b.centres.shape[0]]
+    if not every or centres.shape[0] == 0:
+        return Blobs(centres, np.zeros(centres.shape[0], dtype=bool), np.zeros(centres.shape[0]))
+    c = np.vstack([b.centres for b in every])
+    f = np.concatenate([b.full for b in every])
+    t = np.concatenate([b.tau for b in every])
+    d = np.hypot(centres[:, None, 0] - c[None, :, 0], centres[:, None, 1] - c[None, :, 1])
+    near = d < radius
+    full = (near & f[None, :]).any(axis=1)
+    tau = (near * t[None, :]).sum(axis=1) / np.maximum(near.sum(axis=1), 1)
+    return Blobs(centres, full, tau)

@@ -52,6 +52,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--gate", type=float, default=d.gate_m,
                    help=f"largest distance from a prediction to its blob, m ({d.gate_m})")
     p.add_argument("--seed", type=int, default=1, help="seed of the filters' noise (1)")
+    p.add_argument("--sensors", choices=["ideal", "lab"], default="ideal",
+                   help="what the scans are like: ideal (the simulator's ideal laser, the "
+                   "default) or lab (a real LMS 2xx: FilterConfig.lab(), median filter, "
+                   "mixed pixels trimmed, the sweep's timing, partial blobs kept apart)")
     p.add_argument("--scanners", type=int, metavar="N",
                    help="scans per tick (the world's row of scanners); a scan of another "
                    "row is dropped (default: the first scan of each tick says)")
@@ -172,7 +176,8 @@ class LocalizerNode:
             dist[i], dtheta[i] = s.odom_dist_m, s.odom_dtheta
         began = time.perf_counter()
         views = [(np.asarray(s.ranges), ScanGeometry.of(s)) for s in scans]
-        estimates = self.core.step_scans(views, dist, dtheta)
+        dt = next(iter(senses.values())).dt if senses else 0.0
+        estimates = self.core.step_scans(views, dist, dtheta, dt)
         scan = scans[0]
         self.update_s += time.perf_counter() - began
         for i, e in enumerate(estimates):
@@ -327,8 +332,9 @@ def main(argv: list[str] | None = None) -> int:
         print("btrack localizer: --robots must be at least 1", file=sys.stderr)
         return 2
     try:
-        config = FilterConfig(particles=args.particles, meas_std_m=args.meas_std,
-                              radius_m=args.radius, gate_m=args.gate)
+        make = FilterConfig.lab if args.sensors == "lab" else FilterConfig
+        config = make(particles=args.particles, meas_std_m=args.meas_std,
+                      radius_m=args.radius, gate_m=args.gate)
     except ValueError as exc:
         print(f"btrack localizer: {exc}", file=sys.stderr)
         return 2

@@ -17,6 +17,7 @@ a queue; everything else happens on the main thread.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import logging
 import math
@@ -28,6 +29,8 @@ import time
 import zenoh
 
 from simworld.laser import Laser, laser_row
+from simworld.maps import ROBOT_ROOM_M
+from simworld.sensors import PROFILES, LabLaser, LabSensing, Slip, Walker, clutter_legs, profile
 from simworld.shell import ALIVE, Event, WorldShell, load_checked_map
 from simworld.world import ODOM_NOISE, ROBOT_RADIUS_M, World, parse_start
 from wire import (
@@ -87,6 +90,15 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         default=0.01,
         help="laser range noise, std in m (0.01)",
+    )
+    p.add_argument(
+        "--sensors",
+        choices=PROFILES,
+        default="ideal",
+        help="sensor profile (default ideal: the world as it always was); lab: the LMS's "
+        "bias, noise, mixed pixels, jitter and sweep, a Create's outline, clutter and a "
+        "walking person, noisy and late ice and algae sensors with a dead band, wheel slip "
+        "(simworld/sensors.py)",
     )
     p.add_argument(
         "--scanners",
@@ -197,6 +209,16 @@ class WorldProcess(WorldShell):
         self.mute: set[int] = set()
         self.silent: set[int] = set()
         self.lasers = lasers(world, args) if args.localization == "pf" else []
+        self.profile = profile(args.sensors)
+        self.lab_lasers: list[LabLaser] = []
+        self.lab_sensing: LabSensing | None = None
+        if self.profile is not None:
+            p, m = self.profile, world.map
+            clutter = clutter_legs(m.edge_lo, m.edge_hi, -ROBOT_ROOM_M) if p.clutter else []
+            walker = (Walker(m.edge_lo, m.edge_hi, -ROBOT_ROOM_M + 0.4, 0.9, p.person_speed,
+                             p.leg_radius_m, p.stride_m, p.step_s) if p.person else None)
+            self.lab_lasers = [LabLaser(las, p, clutter, walker) for las in self.lasers]
+            self.lab_sensing = LabSensing(p, world.n, args.seed)
         self.kidnaps = parse_kidnaps(args.kidnap, self.dt)
         self.dropped = 0
         self.timeouts = 0
@@ -279,9 +301,13 @@ class WorldProcess(WorldShell):
             log.warning("tick %d: robot %d carried by (%g, %g) m", k, robot, dx, dy)
         odometry = self.pose_source == "odometry"
         truth = [world.truth(i) for i in range(self.n)]
+        motions = list(world.motion)
         for j, laser in enumerate(self.lasers):  # the localizer publishes the poses
             s = laser.scanner
-            ranges = laser.scan([(x, y) for x, y, _ in truth])
+            if self.lab_lasers:
+                ranges = self.lab_lasers[j].scan(truth, motions, dt, t)
+            else:
+                ranges = laser.scan([(x, y) for x, y, _ in truth])
             self.pub_scan.put(encode(Scan(t, k, ranges, s.x, s.y, s.theta, s.angle_min,
                                           s.angle_step, s.range_max, j, len(self.lasers))))
         for i, until in list(self.booting.items()):
@@ -291,6 +317,10 @@ class WorldProcess(WorldShell):
             if i in self.booting:
                 continue  # still starting: no sensing yet
             r = world.sense(i)
+            if self.lab_sensing is not None:  # what the robot's sensors say, late and noisy
+                x, y, _ = world.truth_back(i, self.lab_sensing.profile.sensor_latency_s, dt)
+                ice, algae = self.lab_sensing.read(i, world.map, x, y)
+                r = dataclasses.replace(r, ice=ice, algae=algae)
             if not self.lasers:  # the pose travels in the Sense
                 pose = list(world.odometry_pose(i) if odometry else truth[i])
                 source = self.pose_source
@@ -485,8 +515,10 @@ def main(argv: list[str] | None = None) -> int:
     gmap = load_checked_map(args, "btrack world")
     if gmap is None:
         return 2
+    lab = profile(args.sensors)
     world = World(gmap, args.robots, args.start, args.seed, args.odom_noise, args.team,
-                  odom_turn_noise=args.odom_turn_noise)
+                  odom_turn_noise=args.odom_turn_noise,
+                  slip=Slip(lab, args.seed) if lab is not None else None)
     total = round(args.duration / args.dt)
 
     with bounded_session(options_from_args(args), "btrack world") as session:

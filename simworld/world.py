@@ -14,6 +14,7 @@ import numpy as np
 
 from simworld.kinematics import integrate_arc, limit_wheels
 from simworld.maps import MIN_DEPTH_M, ROBOT_ROOM_M, GridMap
+from simworld.sensors import Slip, pose_back
 
 ROBOT_RADIUS_M = 0.17
 MARGIN_OUT_M = 0.3  # the patrol goes this far back out past the edge before turning
@@ -87,6 +88,7 @@ class World:
         odom_noise: float = ODOM_NOISE,
         team: int | None = None,
         odom_turn_noise: float | None = None,
+        slip: Slip | None = None,
     ) -> None:
         team = n if team is None else team
         if not 1 <= team <= n:
@@ -107,6 +109,10 @@ class World:
         self._ox, self._oy, self._oth = list(self._x), list(self._y), list(self._th)
         self._odom_d = [0.0] * n
         self._odom_dth = [0.0] * n
+        # each robot's true motion over the last step (distance, turn): where it was
+        # during the step, for a sensor that reads late or a laser that sweeps
+        self.motion = [(0.0, 0.0)] * n
+        self.slip = slip  # None: the wheels never slip (the ideal world)
         self.t = 0.0
         self.k = 0
 
@@ -116,6 +122,11 @@ class World:
     def odometry_pose(self, i: int) -> tuple[float, float, float]:
         """Dead-reckoned pose from the noisy odometry, from the true start pose."""
         return self._ox[i], self._oy[i], self._oth[i]
+
+    def truth_back(self, i: int, back_s: float, dt: float) -> tuple[float, float, float]:
+        """Where robot i was ``back_s`` (at most ``dt``) seconds before now, along its
+        last step of ``dt``."""
+        return pose_back(self.truth(i), self.motion[i], dt, back_s)
 
     def move(self, i: int, dx: float, dy: float) -> None:
         """Carry robot i by (dx, dy) without its odometry noticing (a kidnapping)."""
@@ -135,13 +146,19 @@ class World:
         """Drive every robot for ``dt`` at its command (zero if it has none)."""
         noise, turn_noise = self.odom_noise, self.odom_turn_noise
         draws = self._rng.standard_normal(2 * self.n).tolist()
+        slips = self.slip.draw(self.n).tolist() if self.slip is not None else None
         for i in range(self.n):
             v, omega = cmds.get(i, (0.0, 0.0))
             v, omega = limit_wheels(v, omega)
-            dist, dtheta = v * dt, omega * dt
+            dist, dtheta = v * dt, omega * dt  # what the wheels turned
+            if slips is None:
+                moved, turned = dist, dtheta
+            else:  # the robot makes a little less than its wheels
+                moved, turned = dist * (1.0 - slips[i][0]), dtheta * (1.0 - slips[i][1])
             self._x[i], self._y[i], self._th[i] = integrate_arc(
-                self._x[i], self._y[i], self._th[i], dist, dtheta
+                self._x[i], self._y[i], self._th[i], moved, turned
             )
+            self.motion[i] = (moved, turned)
             odist = dist + noise * abs(dist) * draws[2 * i]
             odth = dtheta + turn_noise * abs(dtheta) * draws[2 * i + 1]
             self._odom_d[i], self._odom_dth[i] = odist, odth

@@ -120,6 +120,7 @@ HIL_REFUSED = {
     "odom_turn_noise": ["--odom-turn-noise", "0.1"],
     "boot_s": ["--boot-s", "2"],
     "scanners": ["--scanners", "2"],
+    "sensors": ["--sensors", "lab"],
     "clouds_every": ["--clouds-every", "5"],
     "live": ["--live"],
 }
