@@ -278,7 +278,9 @@ def render(fleet: Fleet) -> dict[str, str]:
         "BTRACK_WORLD_ARGS": " ".join(b.world_args),
         **({"BTRACK_LASER_PORT": b.laser_port, "BTRACK_EPOCH": repr(fleet.epoch)}
            if hardware else {}),
-        "BTRACK_LOCALIZER_ARGS": " ".join(b.localizer_args),
+        # a real LMS's scans come at its own rate, stamped with their measurement times
+        "BTRACK_LOCALIZER_ARGS": " ".join((*(("--timing", "measured") if hardware else ()),
+                                           *b.localizer_args)),
         "BTRACK_RECORDER_DIR": b.recorder_dir,
         "PYTHONUNBUFFERED": "1",
     })

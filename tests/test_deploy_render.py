@@ -233,3 +233,17 @@ def test_cli_refuses_a_bad_fleet_without_a_traceback(tmp_path: Path) -> None:
     assert "latin1.toml:2: not UTF-8 text (byte 21" in res.stderr
     for args in (["deploy", "--help"], ["deploy", "render", "--help"], ["router", "--help"]):
         assert btrack(*args).returncode == 0
+
+
+def test_a_hardware_fleets_localizer_takes_the_scans_at_their_measured_times() -> None:
+    """A real LMS sends scans at its own rate (5 a second at 38400 baud), each stamped
+    with its measurement time by the bridge: the localizer must not wait for one scan
+    per tick, as in simulation."""
+    fleet = parse(EXAMPLE.read_text())
+    hw = dataclasses.replace(fleet, epoch=1767225600.0,
+                             base=dataclasses.replace(fleet.base, world="hardware",
+                                                      localizer=True))
+    for f, measured in ((fleet, False), (hw, True)):
+        env = next(v for k, v in render(f).items() if k.endswith("/base.env"))
+        line = next(x for x in env.splitlines() if x.startswith("BTRACK_LOCALIZER_ARGS="))
+        assert ("--timing measured" in line) is measured, line
