@@ -3,10 +3,24 @@
 The shell (``agent.process``) feeds it what it hears: liveliness tokens coming and
 going (``alive``), its neighbours' states (``heard``) and, once its robot's sensing of
 a tick is in, that tick with the wall time (``decide``). It answers who the neighbours
-are (the nearest live lower and higher ids), whether to act on the tick, wait for a
-neighbour's state or stand still, and what segment to claim first. It reads no clock:
-the time is an argument, so every race between liveliness news and states can be
-played here in any order.
+are (the nearest live lower and higher ids), whose states to listen to (``followed``),
+whether to act on the tick, wait for a neighbour's state or stand still, and what
+segment to claim first. It reads no clock: the time is an argument, so every race
+between liveliness news and states can be played here in any order.
+
+A robot is live to us when its token is, or, while its token is not, once a state of it
+has come (issue 21). On a team's peer mesh a token does not always reach every peer:
+with 50 agents on a loaded 2-core machine five to eight agents of a team went the whole
+run without a neighbour's token (never seen, or seen once and gone while its robot ran
+on), and in a bare mesh of 50 peers most missed some, while every peer's messages
+reached every other (Zenoh's router forwards messages between peers with no direct
+link, not their tokens). An agent that missed its lower neighbour's token took the next
+one down for its neighbour, computed its boundary against that robot's segment, and the
+neighbour it had missed refused every state it sent (further into its segment than one
+tick of the law can move a boundary: rightly, the claim was made from the wrong chain)
+and waited a second for each, so the whole lockstep crept at a tick a second. So each
+agent also listens for the states of the ids nearest it in the gap to its neighbour on
+each side (``candidates``), and takes one for live once a state of it comes.
 """
 
 from __future__ import annotations
@@ -18,6 +32,17 @@ from agent.controller import initial_segment
 from agent.partition import SegmentView, join_segment
 
 HISTORY = 8  # neighbour states kept per neighbour, by tick
+# Ids listened to on each side, nearest first, in the gap to the neighbour on that side
+# (whose tokens are not up to us): the real neighbour is the nearest live id, so it is
+# found unless as many robots next to us are gone as well.
+CANDIDATES_PER_SIDE = 2
+# A robot whose token went is taken back by its states only from this many ticks after
+# our last one then: its last states may still be on their way (in lockstep at most one
+# tick ahead of ours; on the wall clock as far ahead as agent.plausible lets a
+# neighbour's state be, 10). A token can also go while its robot runs on, on a partial
+# mesh (measured: 50 agents, robot 3's token went for robot 2 before tick 0 and never
+# came back, its states did); then the robot is back after these ticks.
+GONE_TICKS = 10
 JOIN_WAIT_S = 1.0  # longest a joining agent stands still for its neighbours' states, wall s
 
 
@@ -79,6 +104,11 @@ class Membership(Generic[S]):
         self.neighbour_timeout_s = neighbour_timeout_s
         self.join_wait_s = join_wait_s
         self._live: set[int] = set()
+        # Live to us by their states alone, their tokens not up (see the module's doc);
+        # and, of a robot seen to go or waited for in vain, the last tick whose state
+        # proves nothing (one still on its way, sent before it went).
+        self._proven: set[int] = set()
+        self._silent: dict[int, int] = {}
         self._states: dict[int, dict[int, S]] = {}  # by neighbour, by tick
         self._followed_at: dict[int, int] = {}  # by neighbour: our last tick when it became one
         self._mute: set[int] = set()  # neighbours waited for in vain, none of whose states came
@@ -86,6 +116,7 @@ class Membership(Generic[S]):
         self._last_k = -1  # the last tick acted on or stood still on
         self._deadline: float | None = None  # until when a tick waits (see ``decide``)
         self._join_deadline: float | None = None  # until when a joining agent stands still
+        self._refollow()  # the candidates, before any token news
 
     # -- what it is told --------------------------------------------------------------
 
@@ -98,26 +129,47 @@ class Membership(Generic[S]):
             return
         if up:
             self._live.add(robot)
+            self._silent.pop(robot, None)
         else:
             self._live.discard(robot)
+            self._silent[robot] = self._last_k + GONE_TICKS
+        self._proven.discard(robot)
+        self._refollow()
+
+    def _refollow(self) -> None:
+        """After the live set changed: a robot that stops being a neighbour is forgotten
+        (its history starts empty if it comes back); a new neighbour is followed from our
+        last tick, with the state that made it one if it was a candidate."""
         wanted = {r for r in self.neighbours() if r is not None}
         for rid in set(self._followed_at) - wanted:
             del self._followed_at[rid]
             del self._states[rid]
             self._mute.discard(rid)
+        followed = wanted | self.candidates()
+        for rid in set(self._states) - followed:
+            del self._states[rid]
+        for rid in followed - set(self._states):
+            self._states[rid] = {}
         for rid in wanted - set(self._followed_at):
             self._followed_at[rid] = self._last_k
-            self._states[rid] = {}
 
     def heard(self, robot: int, k: int, state: S) -> bool:
         """Neighbour ``robot``'s state of its tick ``k``; whether it was kept. A state of a
-        robot that is not a neighbour (one sent before it stopped being one) is not.
-        States more than ``HISTORY`` ticks before our own last tick are forgotten (not
-        before the newest state heard: one forged for a far tick must not push the
-        real ones out)."""
+        robot that is not a neighbour (one sent before it stopped being one) is not; one
+        of a candidate makes it live to us and a neighbour, unless it may have been sent
+        before its robot went (``GONE_TICKS``) or is of a tick waited for in vain. States
+        more than ``HISTORY`` ticks before our own last tick are forgotten (not before the
+        newest state heard: one forged for a far tick must not push the real ones out)."""
         hist = self._states.get(robot)
         if hist is None:
             return False
+        if robot not in self._followed_at:  # a candidate
+            if k <= self._silent.get(robot, -1):
+                return False
+            self._proven.add(robot)
+            self._silent.pop(robot, None)
+            self._refollow()
+            hist = self._states[robot]
         hist[k] = state
         self._mute.discard(robot)
         ref = self._last_k if self._last_k >= 0 else k
@@ -146,10 +198,22 @@ class Membership(Generic[S]):
             if now < self._deadline:
                 return self._enter(Decision.WAIT, k)
             # waited in vain: a neighbour that never sent a state is not waited for again
-            # until it does (a stray token, or a process up but not acting)
+            # until it does (a stray token, or a process up but not acting); one live to
+            # us by its states alone is live no longer (it has no token to go with it)
             self._mute |= {rid for rid in self.neighbours()
                            if rid is not None and not self._states[rid]}
+            if k > 0:
+                self._drop_silent(self._need(k))
         return self._enter(Decision.ACT, k)
+
+    def _drop_silent(self, need: int) -> None:
+        silent = {rid for rid in self.neighbours() if rid in self._proven
+                  and max(self._states[rid], default=-1) < need}
+        for rid in silent:
+            self._proven.discard(rid)
+            self._silent[rid] = need
+        if silent:
+            self._refollow()
 
     def _enter(self, decision: Decision, k: int) -> Decision:
         self._stage = TRANSITIONS[(self._stage, decision)]
@@ -182,6 +246,11 @@ class Membership(Generic[S]):
         return frozenset(self._live)
 
     @property
+    def proven(self) -> frozenset[int]:
+        """The other robots live to us by their states alone (their tokens not up)."""
+        return frozenset(self._proven)
+
+    @property
     def deadline(self) -> float | None:
         """The wall time at which a waiting tick acts without its neighbours' states
         (the shell wakes then to ask again); None while no tick waits."""
@@ -194,10 +263,28 @@ class Membership(Generic[S]):
         return self._join_deadline
 
     def neighbours(self) -> tuple[int | None, int | None]:
-        """The nearest live lower and higher ids (None at an end of the chain)."""
-        lower = max((r for r in self._live if r < self.robot), default=None)
-        upper = min((r for r in self._live if r > self.robot), default=None)
+        """The nearest live lower and higher ids (None at an end of the chain), live by
+        token or by its states (``proven``)."""
+        live = self._live | self._proven
+        lower = max((r for r in live if r < self.robot), default=None)
+        upper = min((r for r in live if r > self.robot), default=None)
         return lower, upper
+
+    def candidates(self) -> frozenset[int]:
+        """Ids whose states we listen for though they are not neighbours: on each side the
+        ``CANDIDATES_PER_SIDE`` nearest ids between us and the neighbour there (the end
+        of the team as started, without one); their tokens are not up to us."""
+        lower, upper = self.neighbours()
+        below = range(self.robot - 1, -1 if lower is None else lower, -1)
+        above = range(self.robot + 1, self.team if upper is None else upper)
+        out: set[int] = set()
+        for ids in (below, above):
+            out.update(list(ids)[:CANDIDATES_PER_SIDE])
+        return frozenset(out)
+
+    def followed(self) -> frozenset[int]:
+        """Whose states to listen to: the neighbours and the candidates."""
+        return frozenset(r for r in self.neighbours() if r is not None) | self.candidates()
 
     def latest(self, robot: int | None, newest_k: int) -> S | None:
         """Neighbour ``robot``'s latest state of tick ``newest_k`` or before, None if none."""
@@ -239,7 +326,7 @@ class Membership(Generic[S]):
         The wait begins the first time this is asked with something missing."""
         heard = all(rid is None or self.latest(rid, k) is not None
                     for rid in self.neighbours())
-        if self._live and heard:
+        if (self._live or self._proven) and heard:
             return False
         if self._join_deadline is None:
             self._join_deadline = now + self.join_wait_s
@@ -253,13 +340,17 @@ class Membership(Generic[S]):
         listened: it is not waited for, and this tick acts on what we have (the lockstep
         must not stall at every membership change). An agent joining a running team
         waits for its neighbours' states of k-1 or later: it claims a share of them."""
-        need = k - 1 if self._last_k < 0 else min(k - 1, self._last_k)
+        need = self._need(k)
         for rid in self.neighbours():
             if rid is None or self._followed_at[rid] >= need or rid in self._mute:
                 continue
             if max(self._states[rid], default=-1) < need:
                 return False
         return True
+
+    def _need(self, k: int) -> int:
+        """The tick of the neighbours' states that tick ``k`` waits for."""
+        return k - 1 if self._last_k < 0 else min(k - 1, self._last_k)
 
     def team_heard(self) -> bool:
         """At tick 0 (a team starting together): whether the neighbours this robot starts
@@ -268,4 +359,4 @@ class Membership(Generic[S]):
         later, and one that had not would treat them as newcomers it need not wait for,
         and the run would depend on timing."""
         expected = {r for r in (self.robot - 1, self.robot + 1) if 0 <= r < self.team}
-        return expected <= self._live
+        return expected <= self._live | self._proven

@@ -78,6 +78,7 @@ class AgentNode:
         self.wake: queue.SimpleQueue[None] = queue.SimpleQueue()
         self.waiting = False  # a tick has begun (its Sense is here): anything may finish it
         self.neighbour_subs: dict[int, Any] = {}
+        self.found = 0  # neighbours taken for live by their states, their tokens not up
         self.sense: Sense | None = None
         self.pose: Pose | None = None
         # by tick: with hardware a tick's Pose can come after the next tick's Sense
@@ -149,8 +150,11 @@ class AgentNode:
             print(f"agent {self.robot}: {line}", file=sys.stderr, flush=True)
 
     def _follow_neighbours(self) -> None:
-        """Subscribe to exactly the current neighbours' state keys."""
-        wanted = {r for r in self.membership.neighbours() if r is not None}
+        """Subscribe to exactly the state keys membership follows: the neighbours', and
+        those of the candidates (ids next to ours whose tokens are not up to us)."""
+        wanted = self.membership.followed()
+        if wanted == self.neighbour_subs.keys():
+            return
         for rid in set(self.neighbour_subs) - wanted:
             self.neighbour_subs.pop(rid).undeclare()
         for rid in wanted - set(self.neighbour_subs):
@@ -224,7 +228,12 @@ class AgentNode:
             if why is not None:
                 self._reject(key, why)
                 return
-        self.membership.heard(state.robot, state.k, state)
+        if self.membership.heard(state.robot, state.k, state) and side is None:
+            # a candidate's state: it is our neighbour now
+            self.found += 1
+            self._log_some(self.found, f"robot {state.robot}'s state of tick {state.k} came, "
+                           "its token has not: it is live")
+            self._follow_neighbours()
 
     def _unpark(self, every: bool = False) -> None:
         """Judge the states parked for ticks we now have sensing of (``every``: all of
@@ -300,6 +309,7 @@ class AgentNode:
             if k is None:
                 continue
             decision = self.membership.decide(k, time.monotonic())
+            self._follow_neighbours()  # one live by its states alone may have gone silent
             if decision is Decision.STAND_STILL:
                 self._stand_still(k)  # joining a running team: claim once we hear them
             elif decision is Decision.ACT:

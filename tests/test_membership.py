@@ -338,6 +338,7 @@ def test_membership_invariants_over_random_event_sequences(run):
     timeout_s = 0.3
     m: Membership[SegmentView] = Membership(robot, team, neighbour_timeout_s=timeout_s)
     live: set[int] = set()
+    spoke: set[int] = set()  # ids a state of which came
     now = 0.0
     k = 200 if joining else 0  # the next tick to decide
     wait_began: float | None = None
@@ -353,6 +354,7 @@ def test_membership_invariants_over_random_event_sequences(run):
             _, rid, dk, lo, hi = event
             who = m.neighbours()[rid + 2] if rid < 0 else rid
             if who is not None:
+                spoke.add(who)
                 kept = m.heard(who, k + dk, seg(0.1 * lo, 0.1 * hi))
                 assert kept == (who in m.neighbours())
         else:
@@ -361,7 +363,7 @@ def test_membership_invariants_over_random_event_sequences(run):
             heard = m.neighbours_heard(k) if k > 0 else m.team_heard()
             lower, upper = m.neighbours()
             views = {rid: m.latest(rid, k) for rid in (lower, upper) if rid is not None}
-            nobody = not m.live
+            nobody = not m.live and not m.proven  # alive to us by token or by a state
             decision = m.decide(k, now)
             assert (stage_before, decision) in TRANSITIONS
             assert m.stage is TRANSITIONS[(stage_before, decision)]
@@ -389,10 +391,17 @@ def test_membership_invariants_over_random_event_sequences(run):
                     assert lower is None or lo > EDGE[0]
                     assert upper is None or hi < EDGE[1]
             k += skip if decision is not WAIT else skip - 1
-        # the neighbours are always the nearest live lower and higher ids
+        # the neighbours are always the nearest live lower and higher ids, live by token
+        # or by a state of it
         assert m.live == live
-        assert m.neighbours() == (max((r for r in live if r < robot), default=None),
-                                  min((r for r in live if r > robot), default=None))
+        assert m.proven <= spoke - live - {robot}
+        known = live | m.proven
+        assert m.neighbours() == (max((r for r in known if r < robot), default=None),
+                                  min((r for r in known if r > robot), default=None))
+        # listened to: the neighbours, and ids in the gaps
+        lower, upper = m.neighbours()
+        assert all((-1 if lower is None else lower) < r < (team if upper is None else upper)
+                   and r != robot for r in m.candidates())
         # states are kept of the current neighbours only
         for rid in range(MAX_TEAM + 3):
             if rid not in m.neighbours():
