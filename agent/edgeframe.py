@@ -58,6 +58,7 @@ class ClosedEdge:
         self.vertex_angle = [self.piece_angle[j - 1]
                              + 0.5 * wrap_pi(self.piece_angle[j] - self.piece_angle[j - 1])
                              for j in range(n)]
+        self._last: tuple[float, tuple[int, float]] = (math.nan, (0, 0.0))
         self.curvature = [wrap_pi(self.vertex_angle[(j + 1) % n] - self.vertex_angle[j])
                           / seg[j] for j in range(n)]
 
@@ -72,6 +73,13 @@ class ClosedEdge:
     def piece(self, s: float) -> tuple[int, float]:
         """The piece holding arc length ``s`` (any real: it wraps) and how far into it,
         as a fraction."""
+        if s == self._last[0]:  # a tick asks of one s several times
+            return self._last[1]
+        found = self._piece(s)
+        self._last = (s, found)
+        return found
+
+    def _piece(self, s: float) -> tuple[int, float]:
         w = self.wrap(s)
         lo, hi = 0, self.n - 1
         while lo < hi:  # the last vertex at or before w
@@ -180,7 +188,12 @@ class ClosedEdge:
 
     def world_omega(self, v: float, omega_edge: float, s: float, d: float, psi: float
                     ) -> float:
-        """The world turn rate that makes the heading in the frame turn at
-        ``omega_edge``: psi' = omega - kappa s' with s' = v cos psi / (1 - kappa d). A leg
-        along the normal (cos psi = 0) is a straight line in the world."""
-        return omega_edge + self.curvature_at(s) * v * math.cos(psi) / self.stretch(s, d)
+        """The world turn rate for a patrol that steers in the frame as if it were flat.
+        In the frame s' = v cos psi / (1 - kappa d) and psi' = omega - kappa s'; with
+        omega = (omega_edge + kappa v cos psi) / (1 - kappa d) the heading in the frame
+        turns at omega_edge / (1 - kappa d), so that ds/dpsi = cos psi / curvature: the
+        path's extent along s is the patrol's own (an arc lands on the next pass line,
+        deep under a bend or out beyond one), only stretched across it by the frame. A
+        leg along the normal (cos psi = 0, no turn) is a straight line in the world."""
+        return ((omega_edge + self.curvature_at(s) * v * math.cos(psi))
+                / self.stretch(s, d))
