@@ -123,6 +123,7 @@ HIL_REFUSED = {
     "scanners": ["--scanners", "2"],
     "clouds_every": ["--clouds-every", "5"],
     "live": ["--live"],
+    "engine": ["--engine", "inprocess"],
 }
 HIL_PLANNED = {
     "robots": ["--robots", "2"],
