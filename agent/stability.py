@@ -41,7 +41,9 @@ def phase_gain_bound(n: int) -> float:
 
 
 def ring_laplacian(n: int) -> np.ndarray:
-    """The Laplacian of a ring of ``n`` robots (the cycle graph; two robots: one pair)."""
+    """The Laplacian of a ring of ``n`` robots, the cycle graph. A ring of two is each
+    robot's lower and upper neighbour at once, so the pair counts twice (the consensus
+    term pulls with both sides), as the formula's 2 - 2 cos(pi) = 4 says."""
     import numpy as np
 
     if n < 2:
@@ -49,8 +51,6 @@ def ring_laplacian(n: int) -> np.ndarray:
     lap = np.zeros((n, n))
     for i in range(n):
         j = (i + 1) % n
-        if n == 2 and i == 1:
-            break  # two robots are one pair, not two
         lap[i, i] += 1.0
         lap[j, j] += 1.0
         lap[i, j] -= 1.0
@@ -63,8 +63,6 @@ def ring_phase_gain_bound(n: int) -> float:
     cycle's Laplacian, lambda_k = 2 - 2 cos(2 pi k / n) at k = floor(n / 2)."""
     if n < 2:
         return math.inf
-    if n == 2:
-        return phase_gain_bound(2)  # one pair: the chain of two
     return 2.0 / (2.0 - 2.0 * math.cos(2.0 * math.pi * (n // 2) / n))
 
 
@@ -89,8 +87,8 @@ def ring_workload_gain_bound(depths: Sequence[float]) -> float:
     I - K_s M, stable for K_s < 2 / lambda_max(M)."""
     import numpy as np
 
-    if len(depths) < 3:
-        return workload_gain_bound(depths)
+    if len(depths) < 2:
+        return math.inf
     lam = float(np.max(np.real(np.linalg.eigvals(ring_workload_matrix(depths)))))
     return 2.0 / lam
 
