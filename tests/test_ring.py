@@ -216,3 +216,20 @@ def test_the_team_s_maxima_on_a_cut_ring_reach_everyone_and_are_forgotten(n: int
     uncut = run(needs, run(needs[:top] + [old] + needs[top + 1:], start, False, n), False,
                 3 * n)
     assert max(seen(uncut, i, False) for i in range(n)) == old  # never forgotten
+
+
+def test_robots_spread_evenly_round_the_phase_circle_stay_spread() -> None:
+    """The ring's twisted states (README, "Phase on a ring"): five robots 2 pi / 5
+    apart are an equilibrium of eq. 4.7 with wrapped errors, and a small push does not
+    bring them to agreement. The DESIGN's starts (winding 0) never meet one; it is
+    documented, not handled."""
+    n, k_phi = 5, 0.3
+    phases = [2 * math.pi * i / n + 0.01 * math.sin(i) for i in range(n)]
+    for _ in range(500):
+        phases = [
+            desired_phase_step(phases[i], 0.0, 0.1, 0.0, consensus_term(
+                phases[i], phases[(i - 1) % n], phases[(i + 1) % n], k_phi))
+            for i in range(n)
+        ]
+    errors = [wrap_pi(phases[(i + 1) % n] - phases[i]) for i in range(n)]
+    assert all(e == pytest.approx(2 * math.pi / n, abs=1e-6) for e in errors)
