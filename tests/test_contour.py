@@ -195,3 +195,23 @@ def test_every_floe_shape_builds_a_ring_the_robots_can_patrol(shape: str) -> Non
     if shape == "bay":
         assert min(edge.curvature) < -0.1  # a real bay: the edge bends away from the ice
     gmap.check_ring_room()
+
+
+_BAY: list[ClosedEdge] = []
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.floats(0, 1), st.floats(-0.9, 0.7), st.floats(-0.2, 0.2))
+def test_the_frame_round_a_bay_maps_back_and_walks_from_a_hint(frac: float, d: float,
+                                                               off: float) -> None:
+    """Round a floe with a bay (concave and convex bends), from the start line out to
+    the deepest legs in: a point's (s, d) is where the frame put it, found from a hint
+    up to 0.2 m of s off (a robot's last foot)."""
+    if not _BAY:
+        _BAY.append(floe_map("floe:1,shape=bay,size=2.5,algae=none").closed_edge)
+    edge = _BAY[0]
+    s = frac * edge.length
+    x, y = edge.at(s, d)
+    s2, d2 = edge.project(x, y, hint=edge.wrap(s + off))
+    assert d2 == pytest.approx(d, abs=1e-6)
+    assert abs((s2 - s + 0.5 * edge.length) % edge.length - 0.5 * edge.length) < 1e-6
