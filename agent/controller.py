@@ -22,6 +22,7 @@ from agent.phase import (
     position_to_phase,
     wrap_pi,
 )
+from agent.ring import ring_bins
 from agent.team import TeamRate, chain_max, cycle_for, passes_for, team_max
 
 
@@ -137,16 +138,24 @@ class Controller:
         gains: Gains | None = None,
         patrol: PatrolConfig | None = None,
         limits: RobotLimits | None = None,
+        ring_length: float | None = None,
     ):
-        if not edge_lo <= lo < hi <= edge_hi:
+        """``ring_length``: the edge is closed, this long (agent.ringcontrol); the depth
+        map's bins then run from s = 0 and a whole number of them make the ring."""
+        if ring_length is None and not edge_lo <= lo < hi <= edge_hi:
             raise ValueError(f"segment [{lo}, {hi}] not inside the edge [{edge_lo}, {edge_hi}]")
+        if ring_length is not None and not 0.0 < hi - lo <= ring_length:
+            raise ValueError(f"arc [{lo}, {hi}] is not part of a ring of {ring_length} m")
         self.robot = robot
         self.gains = gains or Gains()
         self.limits = limits or RobotLimits()
         cfg = patrol or PatrolConfig()
         self.edge = (edge_lo, edge_hi)
         self.lo, self.hi = lo, hi
-        self.depth_map = DepthMap(edge_lo, cfg.bin_m, cfg.min_depth_m)
+        if ring_length is None:
+            self.depth_map = DepthMap(edge_lo, cfg.bin_m, cfg.min_depth_m)
+        else:
+            self.depth_map = DepthMap(0.0, ring_bins(ring_length, cfg.bin_m), cfg.min_depth_m)
         self.patrol = Patrol(cfg, self.depth_map, x, direction=1)
         self.phase_des: float | None = None
         self.turns = 0.0  # phi_des unwrapped: the count of sweeps the pass grid walks by
@@ -189,6 +198,16 @@ class Controller:
             target = cycle_for(team_max(need, lower_need, upper_need), passes, g.cycle_margin)
             cycle = g.cycle_s if g.cycle_s > 0 else self.rate.update(target, dt)
         return cycle, passes, (needs.below, needs.above, spans.below, spans.above)
+
+    def _learn(self, nb: Neighbour) -> None:
+        """Take the depths a neighbour measured near the ends it shares with us."""
+        self.depth_map.learn(nb.depths)
+
+    def _chain_sides(self, lower: Neighbour | None, upper: Neighbour | None,
+                     has_lower: bool, has_upper: bool) -> tuple[bool, bool]:
+        """Which neighbours the team's agreement (``_agree``, ``_count_turns``) runs
+        through: on a chain, both that exist."""
+        return has_lower, has_upper
 
     def _update_boundaries(self, lower: Neighbour | None, upper: Neighbour | None,
                            has_lower: bool, has_upper: bool) -> None:
@@ -234,14 +253,16 @@ class Controller:
         old = (self.lo, self.hi)
         for nb in (lower, upper):
             if nb is not None:
-                self.depth_map.learn(nb.depths)
+                self._learn(nb)
         self._update_boundaries(lower, upper, has_lower, has_upper)
+        agree_lower, agree_upper = self._chain_sides(lower, upper, has_lower, has_upper)
         before = self.phase_des
         if before is not None and self.published is not None:
             lag = wrap_pi(before - position_to_phase(x, self.lo, self.hi,
                                                      self.patrol.view.direction))
             self.hurry = lag > self.gains.hurry_rad
-        self.cycle_s, self.passes, chain = self._agree(dt, lower, upper, has_lower, has_upper)
+        self.cycle_s, self.passes, chain = self._agree(dt, lower, upper, agree_lower,
+                                                       agree_upper)
         rate = TWO_PI / self.cycle_s
         steer = self.patrol.step(x, y, theta, ice, algae, self.lo, self.hi,
                                  TeamInput(self.clock, self.passes, self.hurry))
@@ -260,7 +281,7 @@ class Controller:
             )
             self.phase_des = desired_phase_step(mine, rate, dt, shift, consensus)
         self.phase_des = limit_lead(self.phase_des, phase, g.max_lead_rad)
-        self._count_turns(before, lower if has_lower else None)
+        self._count_turns(before, lower if agree_lower else None)
         v = self._speed(steer, phase, rate, y, dt)
         v, omega = wheel_limited(v, v * steer.curvature, self.limits)
         depth_avg = self.depth_map.average(self.lo, self.hi)

@@ -4,6 +4,10 @@ Phase: the error map is I - K_phi L with L the path Laplacian of n robots, stabl
 for K_phi < 2 / lambda_max(L) = 2 / (2 + 2 cos(pi / n)).
 Workload: the error map is I - K_s M(d) (thesis eq. 4.4) with M the depth-weighted
 chain matrix, stable for K_s < 2 / lambda_max(M).
+On a ring (a closed edge: robot n-1 and robot 0 are neighbours too) L is the cycle's
+Laplacian, eigenvalues 2 - 2 cos(2 pi k / n), so K_phi < 2 / (2 - 2 cos(2 pi floor(n/2)
+/ n)): 2/3 for n = 3, 1/2 for every even n; M gains the pair (n-1, 0), and Gershgorin's
+4 d_max bounds it as it bounds the chain's.
 """
 
 from __future__ import annotations
@@ -34,6 +38,59 @@ def phase_gain_bound(n: int) -> float:
     if n < 2:
         return math.inf
     return 2.0 / (2.0 + 2.0 * math.cos(math.pi / n))
+
+
+def ring_laplacian(n: int) -> np.ndarray:
+    """The Laplacian of a ring of ``n`` robots, the cycle graph. A ring of two is each
+    robot's lower and upper neighbour at once, so the pair counts twice (the consensus
+    term pulls with both sides), as the formula's 2 - 2 cos(pi) = 4 says."""
+    import numpy as np
+
+    if n < 2:
+        raise ValueError("a ring needs at least two robots")
+    lap = np.zeros((n, n))
+    for i in range(n):
+        j = (i + 1) % n
+        lap[i, i] += 1.0
+        lap[j, j] += 1.0
+        lap[i, j] -= 1.0
+        lap[j, i] -= 1.0
+    return lap
+
+
+def ring_phase_gain_bound(n: int) -> float:
+    """Largest stable K_phi (exclusive) for a ring of ``n`` robots: 2 / lambda_max of the
+    cycle's Laplacian, lambda_k = 2 - 2 cos(2 pi k / n) at k = floor(n / 2)."""
+    if n < 2:
+        return math.inf
+    return 2.0 / (2.0 - 2.0 * math.cos(2.0 * math.pi * (n // 2) / n))
+
+
+def ring_workload_matrix(depths: Sequence[float]) -> np.ndarray:
+    """M of e_Psi(t+1) = (I - K_s M) e_Psi(t) on a ring, e_i = Psi_{i+1} - Psi_i for
+    i = 0..n-1 (indices mod n): the boundary between i and i+1 moves by K_s e_i."""
+    import numpy as np
+
+    d = list(depths)
+    n = len(d)
+    mat = np.zeros((n, n))
+    for i in range(n):
+        mat[i, i] += d[i] + d[(i + 1) % n]
+        mat[i, (i + 1) % n] -= d[(i + 1) % n]
+        mat[i, (i - 1) % n] -= d[i]
+    return mat
+
+
+def ring_workload_gain_bound(depths: Sequence[float]) -> float:
+    """Largest stable K_s (exclusive) on a ring with these depths: the sum of the
+    errors round the ring is always 0 (1^T M = 0), and on that subspace the map is
+    I - K_s M, stable for K_s < 2 / lambda_max(M)."""
+    import numpy as np
+
+    if len(depths) < 2:
+        return math.inf
+    lam = float(np.max(np.real(np.linalg.eigvals(ring_workload_matrix(depths)))))
+    return 2.0 / lam
 
 
 def workload_matrix(depths: Sequence[float]) -> np.ndarray:
@@ -68,13 +125,16 @@ def workload_gain_bound_any(max_depth: float) -> float:
     return 2.0 / (4.0 * max_depth)
 
 
-def check_gains(n: int, k_phi: float, k_s: float, max_depth: float) -> list[str]:
-    """Reasons the gains are unstable for a chain of ``n`` robots; empty if stable."""
+def check_gains(n: int, k_phi: float, k_s: float, max_depth: float, closed: bool = False
+                ) -> list[str]:
+    """Reasons the gains are unstable for a chain (or, ``closed``, a ring) of ``n``
+    robots; empty if stable."""
     problems = []
-    bound = phase_gain_bound(n)
+    bound = ring_phase_gain_bound(n) if closed else phase_gain_bound(n)
+    shape = "ring" if closed else "chain"
     if not 0.0 < k_phi < bound:
         problems.append(
-            f"K_phi = {k_phi} is outside the stable range (0, {bound:.4f}) for a chain of {n}"
+            f"K_phi = {k_phi} is outside the stable range (0, {bound:.4f}) for a {shape} of {n}"
         )
     ks_bound = workload_gain_bound_any(max_depth)
     if not 0.0 < k_s < ks_bound:

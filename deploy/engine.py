@@ -20,7 +20,10 @@ from typing import Any
 import numpy as np
 
 from agent import config as agent_config
-from agent.controller import Controller, Neighbour, initial_segment
+from agent.controller import Controller, Gains, Neighbour, RobotLimits, initial_segment
+from agent.patrol import PatrolConfig
+from agent.ring import frame_shift, initial_arc
+from agent.ringcontrol import RingController
 from report.measures import EdgeModel, team_measures
 from simworld.maps import GridMap, load_map
 from simworld.world import ODOM_NOISE, ROBOT_RADIUS_M, Reading, World
@@ -62,6 +65,10 @@ class Tracks:
     workload: np.ndarray  # the workload the agent believed
     cycle_s: np.ndarray  # the team cycle the agent used
     pose_error: np.ndarray  # how far the pose the agent steered by was from the truth, m
+    # On a closed edge: the true pose in edge coordinates, s in the agent's own frame
+    # (the whole turn nearest its arc's middle) and d into the ice; None on an open edge
+    s: np.ndarray | None = None
+    d: np.ndarray | None = None
 
 
 def run(case: EngineCase, gmap: GridMap | None = None) -> tuple[GridMap, Tracks]:
@@ -71,6 +78,8 @@ def run(case: EngineCase, gmap: GridMap | None = None) -> tuple[GridMap, Tracks]
                          f"{case.localization!r}")
     gains, patrol, limits = agent_config.load(case.config, case.overrides)
     gmap = gmap or load_map(case.map, case.scale, seed=case.seed)
+    if gmap.closed:
+        return gmap, _run_ring(case, gmap, gains, patrol, limits)
     n = case.robots
     world = World(gmap, n, case.start, seed=case.seed, odom_noise=case.odom_noise,
                   odom_turn_noise=case.odom_turn_noise)
@@ -118,6 +127,50 @@ def run(case: EngineCase, gmap: GridMap | None = None) -> tuple[GridMap, Tracks]
                         pose_error)
 
 
+def _run_ring(case: EngineCase, gmap: GridMap, gains: Gains, patrol: PatrolConfig,
+              limits: RobotLimits) -> Tracks:
+    """``run`` on a closed edge: a ring of ``RingController``s, every robot's
+    neighbours i - 1 and i + 1 mod n, with truth poses (pf and odometry round a floe
+    are later work)."""
+    if case.localization != "truth":
+        raise ValueError("a ring on a closed edge runs with truth poses only, so far")
+    n = case.robots
+    edge = gmap.closed_edge
+    world = World(gmap, n, case.start, seed=case.seed, odom_noise=case.odom_noise,
+                  odom_turn_noise=case.odom_turn_noise)
+    ticks = int(round(case.duration_s / DT_S))
+    arrays = [np.zeros((n, ticks)) for _ in range(11)]
+    x, y, lo, hi, direction, seen_phase, seen_work, cycle, pose_error, s, d = arrays
+    controllers = []
+    for i in range(n):
+        px, py, _ = world.truth(i)
+        controllers.append(RingController(i, n, edge, *initial_arc(i, n, edge.length), px,
+                                          py, gains, patrol, limits))
+    published: list[Neighbour | None] = [None] * n
+    for k in range(ticks):
+        cmds, now = {}, []
+        readings = [world.sense(i) for i in range(n)]
+        for i in range(n):
+            px, py, pth = world.truth(i)
+            ctl = controllers[i]
+            out = ctl.step(DT_S, px, py, pth, readings[i].ice, readings[i].algae,
+                           published[(i - 1) % n], published[(i + 1) % n])
+            now.append(ctl.published)
+            cmds[i] = (out.v, out.omega)
+            x[i, k], y[i, k] = px, py
+            lo[i, k], hi[i, k], direction[i, k] = out.lo, out.hi, out.direction
+            seen_phase[i, k], seen_work[i, k] = out.phase, out.workload
+            cycle[i, k] = out.cycle_s
+            # the true pose in the frame: the one the agent steered by (truth poses),
+            # its s in the whole turn of the arc it ends the tick with
+            st, d[i, k], _ = ctl.edge_coordinates
+            s[i, k] = st + frame_shift(st, 0.5 * (out.lo + out.hi), edge.length)
+        published = list(now)
+        world.step(cmds, DT_S)
+    t = np.arange(ticks) * DT_S
+    return Tracks(t, x, y, lo, hi, direction, seen_phase, seen_work, cycle, pose_error, s, d)
+
+
 class _Localization:
     """What ``btrack world --localization pf`` and ``btrack localizer`` do each tick:
     the row of scanners' scans of the true poses, then one filter step on them and the
@@ -156,6 +209,16 @@ def measures(gmap: GridMap, tracks: Tracks) -> dict[str, float]:
     """Every measure of the report (``report.measures.team_measures``) of a run: the
     map's edge and true patrol depth as the world tells the recorder, the robots' true
     tracks, and what their agents published."""
+    if tracks.s is not None and tracks.d is not None:  # a ring on a closed edge
+        from report.ring import RingEdge, ring_measures
+
+        length = gmap.closed_edge.length
+        bins = max(1, round(length / gmap.cell_m))
+        ring = RingEdge(length, length / bins, gmap.ring_patrol_depth_bins(bins),
+                        ROBOT_RADIUS_M)
+        tr = tracks
+        return ring_measures(tr.t, tracks.s, tracks.d, tr.lo, tr.hi, tr.direction,
+                             tr.phase, tr.workload, ring)
     cell = gmap.cell_m  # the report's bins: the map's cells, as WorldInfo's
     edge = EdgeModel(gmap.edge_lo, gmap.edge_hi, cell, gmap.patrol_depth_bins(cell),
                      gmap.edge_y_bins(cell), ROBOT_RADIUS_M)

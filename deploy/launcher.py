@@ -72,7 +72,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--map", default="half-algae",
                    help="no-algae | half-algae | random-algae | FILE.png | "
                    "procedural:SEED[,length=..,edge=..,amplitude=..,algae=..] (see btrack maps) "
-                   "(default half-algae)")
+                   "| floe:SEED[,shape=round|elongated|bay,size=..,algae=..] or closed:FILE.png "
+                   "(a closed edge, --engine inprocess) (default half-algae)")
     p.add_argument("--scale", type=float, default=0.05, help="PNG map metres per pixel")
     p.add_argument("--start", default="ahead:1",
                    help="in-phase | ahead:K (robot K starts 72 deg ahead; default ahead:1)")
@@ -137,6 +138,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--hil", action="store_true",
                    help="hardware in the loop: emulated Creates and LMS on pseudo-terminals "
                         "behind the real bridges (btrack bridge); --duration is wall seconds")
+    p.add_argument("--engine", choices=["bus", "inprocess"], default="bus",
+                   help="bus: every part its own process over Zenoh; inprocess: the whole "
+                   "team in this process (deploy.engine, the same cores bit for bit), "
+                   "measures and figures but no recording. A closed edge (an island map: "
+                   "floe:SEED,.. or a PNG whose ice touches no border) runs in-process "
+                   "only, so far, with truth poses [bus]")
     p.add_argument("--hil-faults", type=float, metavar="P",
                    help="with --hil: fraction of device messages damaged on purpose (0.005)")
     return p
@@ -290,7 +297,8 @@ def fail(group: ProcessGroup, child: Child, what: str, name: str = "btrack sim")
 HIL_REFUSED = (("fault", "--fault"), ("chaos", "--chaos"), ("kidnap", "--kidnap"),
                ("odom_noise", "--odom-noise"), ("odom_turn_noise", "--odom-turn-noise"),
                ("scanners", "--scanners"), ("sensors", "--sensors"),
-               ("live", "--live"), ("clouds_every", "--clouds-every"))
+               ("live", "--live"), ("clouds_every", "--clouds-every"),
+               ("engine", "--engine"))
 
 
 def hil_refusal(args: argparse.Namespace) -> str | None:
@@ -348,6 +356,10 @@ def refusal(args: argparse.Namespace, bodies: int) -> str | None:
         gmap = load_map(args.map, args.scale, args.seed)
     except MapError as exc:
         return f"--map: {exc}"
+    if gmap.closed and args.engine != "inprocess":
+        return (f"{args.map} is a closed edge (an island): a ring runs in-process only, so "
+                "far: add --engine inprocess (truth poses); over the bus, a ring's agents, "
+                "world and report are later work")
     edge = gmap.edge_hi - gmap.edge_lo
     if bodies * gains.min_segment_m > edge:
         return (f"{bodies} robots need {bodies * gains.min_segment_m:.2f} m of edge at "
@@ -392,6 +404,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"btrack sim: {exc}", file=sys.stderr)
         return 2
     why = hil_refusal(args) or refusal(args, bodies)
+    asked_localization = args.localization  # the in-process engine has its own default
     if args.localization is None:
         args.localization = "pf"
     if why is None and not args.hil:
@@ -405,13 +418,17 @@ def run(args: argparse.Namespace) -> int:
     if why is not None:
         print(f"btrack sim: {why}", file=sys.stderr)
         return 2
-    defaults = Gains()
+    defaults = Gains()  # a ring's bound is checked where its controllers are made
     problems = check_gains(args.robots, defaults.k_phi if args.k_phi is None else args.k_phi,
                            defaults.k_s if args.k_s is None else args.k_s, 2.0)
     if problems:
         print("btrack sim: unstable gains: " + "; ".join(problems), file=sys.stderr)
         return 2
     args.out = out
+    if args.engine == "inprocess":
+        from deploy import inprocess
+
+        return inprocess.run(args, out, asked_localization)
     if args.hil:  # the hardware stack with emulated devices: hwbridge/hil.py
         from hwbridge import hil
 

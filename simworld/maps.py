@@ -16,6 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
+from agent.edgeframe import ClosedEdge
+from simworld.contour import ContourError, closed_edge, normal_depths
+
 MIN_DEPTH_M = 0.3  # patrol depth where there is no (or little) algae
 ROBOT_ROOM_M = 1.0  # robots start this far below the lowest edge
 LASER_ROOM_M = 1.0  # the laser sits this far below the robots
@@ -43,10 +46,14 @@ class GridMap:
     cell_m: float
     name: str = "map"
     min_depth: float = MIN_DEPTH_M
+    # The ice is an island and its edge closed (a ring of robots patrols its contour):
+    # traced from the grid in __post_init__, refused if it is not one island.
+    closed: bool = False
     # derived per column, filled in __post_init__
     _edge_row: np.ndarray = field(init=False, repr=False)  # lowest non-water row, -1 if none
     _algae_m: np.ndarray = field(init=False, repr=False)  # algae extent above the local edge
     _y0: float = field(init=False, repr=False)  # y of the bottom of row 0
+    _closed_edge: ClosedEdge | None = field(init=False, repr=False, default=None)
 
     def __post_init__(self) -> None:
         ice = np.asarray(self.ice, dtype=bool)
@@ -67,6 +74,45 @@ class GridMap:
         object.__setattr__(self, "_edge_row", edge_row)
         object.__setattr__(self, "_algae_m", np.maximum(algae_m, 0.0))
         object.__setattr__(self, "_y0", -float(edge_row[has_ice].min()) * self.cell_m)
+        if self.closed:
+            try:
+                edge = closed_edge(ice, self.cell_m, self._y0, f"map {self.name}")
+            except ContourError as exc:
+                raise MapError(str(exc)) from None
+            object.__setattr__(self, "_closed_edge", edge)
+
+    @property
+    def closed_edge(self) -> ClosedEdge:
+        """The island's contour, s counterclockwise from its first vertex (closed maps)."""
+        if self._closed_edge is None:
+            raise MapError(f"map {self.name} has an open edge, not a closed one")
+        return self._closed_edge
+
+    def ring_patrol_depth_bins(self, bins: int, max_depth_m: float = 3.0) -> list[float]:
+        """True patrol depth per bin of ``bins`` equal bins of the closed contour from
+        s = 0: max(min_depth, the algae's depth along the inward normal)."""
+        depth = normal_depths(self.closed_edge, self.ice, self.algae, self.cell_m, self._y0,
+                              bins, max_depth_m)
+        return [round(float(max(self.min_depth, d)), 9) for d in depth]
+
+    def check_ring_room(self, where: str = "") -> None:
+        """Refuse an island without ROBOT_ROOM_M + LASER_ROOM_M of water between it and
+        the map's border, the robots' start line and the laser's room."""
+        need = ROBOT_ROOM_M + LASER_ROOM_M
+        rows, cols = np.nonzero(self.ice)
+        gaps = {
+            "left": (cols.min(), (int(rows[cols.argmin()]), int(cols.min()))),
+            "right": (self.cols - 1 - cols.max(), (int(rows[cols.argmax()]), int(cols.max()))),
+            "bottom": (rows.min(), (int(rows.min()), int(cols[rows.argmin()]))),
+            "top": (self.rows - 1 - rows.max(), (int(rows.max()), int(cols[rows.argmax()]))),
+        }
+        side, (gap, (row, col)) = min(gaps.items(), key=lambda kv: kv[1][0])
+        if gap * self.cell_m + 1e-9 < need:
+            raise MapError(
+                f"not enough water round the island{where}: at pixel (column {col}, row"
+                f" {self.rows - 1 - row} from the top) it is {gap * self.cell_m:.2f} m from"
+                f" the map's {side} side; need {need:.1f} m ({ROBOT_ROOM_M:.0f} m to the"
+                f" robots' start line and {LASER_ROOM_M:.0f} m more)")
 
     # geometry --------------------------------------------------------------
     @property
@@ -92,13 +138,18 @@ class GridMap:
 
     @cached_property
     def edge_lo(self) -> float:
-        """s_0: the left side of the leftmost column holding ice."""
+        """s_0: the left side of the leftmost column holding ice (0 on a closed edge)."""
+        if self._closed_edge is not None:
+            return 0.0
         cols = np.flatnonzero(self._edge_row >= 0)
         return float(cols[0]) * self.cell_m
 
     @cached_property
     def edge_hi(self) -> float:
-        """s_n: the right side of the rightmost column holding ice."""
+        """s_n: the right side of the rightmost column holding ice (the contour's length
+        on a closed edge)."""
+        if self._closed_edge is not None:
+            return self._closed_edge.length
         cols = np.flatnonzero(self._edge_row >= 0)
         return float(cols[-1] + 1) * self.cell_m
 
@@ -249,9 +300,13 @@ def _nearest_colour(rgb: np.ndarray) -> np.ndarray:
     return kind
 
 
-def load_png(path: str | Path, scale_m_per_px: float = 0.05) -> GridMap:
+def load_png(path: str | Path, scale_m_per_px: float = 0.05, closed: bool | None = None
+             ) -> GridMap:
     """A map drawn in the thesis's colours: each pixel is water (blue), ice (white) or
-    algae under ice (green), whichever its colour is nearest. Image row 0 is the top."""
+    algae under ice (green), whichever its colour is nearest. Image row 0 is the top.
+    ``closed``: the ice is an island whose contour the robots patrol as a ring (refused,
+    with the pixel at fault, if it is not one island off the border without holes);
+    None: closed if no ice touches the image's border, else open."""
     if not scale_m_per_px > 0:
         raise MapError(f"scale must be positive, got {scale_m_per_px}")
     try:
@@ -276,6 +331,13 @@ def load_png(path: str | Path, scale_m_per_px: float = 0.05) -> GridMap:
     ice = kind != 0
     if not ice.any():
         raise MapError(f"map image {path} has no ice pixel (white or green)")
+    if closed is None:
+        closed = not (ice[0].any() or ice[-1].any() or ice[:, 0].any() or ice[:, -1].any())
+    if closed:
+        gmap = GridMap(ice=ice, algae=kind == 2, cell_m=scale_m_per_px, name=str(path),
+                       closed=True)
+        gmap.check_ring_room(f" of map image {path}")
+        return gmap
     gmap = GridMap(ice=ice, algae=kind == 2, cell_m=scale_m_per_px, name=str(path))
     height = rgb.shape[0]
     lowest = int(gmap._edge_row[gmap._edge_row >= 0].min())
@@ -305,8 +367,9 @@ def write_png(gmap: GridMap, path: str | Path) -> None:
 
 
 MAP_CHOICES = (
-    f"{', '.join(BUILTIN_NAMES)}, procedural:SEED[,length=..,edge=..,amplitude=..,algae=..]"
-    " or a .png file"
+    f"{', '.join(BUILTIN_NAMES)}, procedural:SEED[,length=..,edge=..,amplitude=..,algae=..],"
+    " floe:SEED[,shape=..,size=..,algae=..], a .png file (an island of ice in it: a closed"
+    " edge) or closed:FILE.png (a closed edge, refused if its ice is not one island)"
 )
 
 
@@ -319,6 +382,12 @@ def load_map(name_or_path: str, scale_m_per_px: float = 0.05, seed: int = 1) -> 
         from simworld.procedural import procedural_map  # it imports this module
 
         return procedural_map(name_or_path, BUILTIN_CELL_M)
+    if name_or_path.startswith("floe:"):
+        from simworld.floes import floe_map  # it imports this module
+
+        return floe_map(name_or_path, BUILTIN_CELL_M)
+    if name_or_path.startswith("closed:"):
+        return load_png(name_or_path.removeprefix("closed:"), scale_m_per_px, closed=True)
     if name_or_path.lower().endswith(".png") or Path(name_or_path).exists():
         return load_png(name_or_path, scale_m_per_px)
     raise MapError(f"unknown map {name_or_path!r}: use one of {MAP_CHOICES}")

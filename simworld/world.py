@@ -54,6 +54,8 @@ def start_poses(gmap: GridMap, n: int, start: str) -> list[tuple[float, float, f
     the lowest edge, heading +y; phase 0 a hair inside the segment, or phase 2 pi / 5
     (0.4 of the segment into the round trip) for the robot started ahead."""
     ahead = parse_start(start, n)
+    if gmap.closed:
+        return _ring_poses(gmap, n, ahead, ROBOT_ROOM_M)
     lo, hi = gmap.edge_lo, gmap.edge_hi
     seg = (hi - lo) / n
     y = -ROBOT_ROOM_M  # y = 0 is the lowest edge
@@ -66,9 +68,28 @@ def start_poses(gmap: GridMap, n: int, start: str) -> list[tuple[float, float, f
     return poses
 
 
+def _ring_poses(gmap: GridMap, n: int, ahead: int | None, out_m: float
+                ) -> list[tuple[float, float, float]]:
+    """Start poses round a closed edge: ``out_m`` out along the outward normal of equal
+    arcs from s = 0, heading in along the normal; phase 0 a hair inside the arc, the
+    robot started ahead 0.4 of its round trip in."""
+    edge = gmap.closed_edge
+    seg = edge.length / n
+    poses = []
+    for i in range(n):
+        frac = AHEAD_PHASE / (2.0 * math.pi) * 2.0
+        s = i * seg + (frac * seg if i == ahead else min(START_INSIDE_M, 0.5 * seg))
+        x, y = edge.at(s, -out_m)
+        poses.append((x, y, edge.tangent_angle(s) + math.pi / 2.0))
+    return poses
+
+
 def parked_poses(gmap: GridMap, count: int) -> list[tuple[float, float, float]]:
     """Robots that join the team later wait behind the start line (between it and the
-    laser), spread evenly along the edge, heading +y."""
+    laser), spread evenly along the edge, heading +y (in along the normal on a closed
+    edge)."""
+    if gmap.closed:
+        return _ring_poses(gmap, count, None, ROBOT_ROOM_M + PARKED_BEHIND_M)
     lo, hi = gmap.edge_lo, gmap.edge_hi
     y = -ROBOT_ROOM_M - PARKED_BEHIND_M
     return [(lo + (j + 0.5) * (hi - lo) / count, y, math.pi / 2.0) for j in range(count)]

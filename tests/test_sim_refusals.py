@@ -123,6 +123,7 @@ HIL_REFUSED = {
     "sensors": ["--sensors", "lab"],
     "clouds_every": ["--clouds-every", "5"],
     "live": ["--live"],
+    "engine": ["--engine", "inprocess"],
 }
 HIL_PLANNED = {
     "robots": ["--robots", "2"],

@@ -1,0 +1,207 @@
+"""The measures of a ring's run on a closed edge: phase and workload errors of every
+neighbour pair round the ring (robot n-1 and robot 0 included), and the revisit times
+of points along the closed contour against the optimum of a patrolled cycle.
+
+The tracks are in the edge's frame: s along the contour in each robot's own frame (the
+whole turn of its arc), d across it, positive into the ice. The errors and their
+steady state are the chain's (``report.measures.error_measures``) on the ring's pairs;
+a visit of a point is a crossing of the contour (d = 0) within the robot's radius of it,
+distances taken round the ring.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from agent.phase import position_to_phase_array as position_phase
+from agent.phase import wrap_pi_array as wrap_pi
+from report.measures import (
+    POINT_STEP_M,
+    VISIT_MERGE_S,
+    TeamErrors,
+    crossings,
+    error_measures,
+    idleness_measures,
+    nanmax,
+    path_length_phase,
+    point_visits,
+    revisit_window,
+    still_fraction,
+    sweep_index,
+    sweep_rate,
+    worst_idleness,
+)
+
+
+@dataclass(frozen=True)
+class RingEdge:
+    """The closed edge as the measures see it: its length and the true patrol depth
+    per bin of ``bin_m`` from s = 0 (a whole number of bins make the ring)."""
+
+    length: float
+    bin_m: float
+    patrol_depth: Sequence[float]
+    robot_radius: float = 0.17
+
+    @property
+    def total_workload(self) -> float:
+        return float(np.sum(np.asarray(self.patrol_depth, dtype=float)) * self.bin_m)
+
+    def workload(self, lo: np.ndarray | float, hi: np.ndarray | float) -> np.ndarray:
+        """The true workload of arcs [lo, hi] in any whole turn (eq. 3.2 round a ring)."""
+        return self._integral(np.asarray(hi, dtype=float)) - self._integral(
+            np.asarray(lo, dtype=float))
+
+    def _integral(self, s: np.ndarray) -> np.ndarray:
+        depth = np.asarray(self.patrol_depth, dtype=float)
+        edges = self.bin_m * np.arange(depth.size + 1)
+        area = np.concatenate([[0.0], np.cumsum(depth * self.bin_m)])
+        turns = np.floor(s / self.length)
+        return turns * area[-1] + np.interp(s - turns * self.length, edges, area)
+
+
+def ring_pairs(n: int) -> list[tuple[int, int]]:
+    """Neighbour pairs of a ring of n: (i, i + 1 mod n); one pair for two robots."""
+    if n < 2:
+        return []
+    return [(i, (i + 1) % n) for i in range(n if n > 2 else 1)]
+
+
+def ring_errors(t: np.ndarray, s: np.ndarray, d: np.ndarray, lo: np.ndarray,
+                hi: np.ndarray, direction: np.ndarray, seen_phase: np.ndarray,
+                seen_workload: np.ndarray, edge: RingEdge) -> TeamErrors:
+    """Errors of every pair round the ring, arrays (robots, samples): position phase
+    (eq. 3.1) from the true s on each robot's arc, the path-length phase from the path
+    in the edge's frame, the true workload of each arc, and what the agents published."""
+    n = s.shape[0]
+    pairs = ring_pairs(n)
+    phase = position_phase(s, lo, hi, direction)
+    path = np.vstack([path_length_phase(s[j], d[j], direction[j]) for j in range(n)])
+    work = edge.workload(lo, hi)
+
+    def errors(values: np.ndarray, wrap: bool) -> np.ndarray:
+        rows = np.vstack([values[b] - values[a] for a, b in pairs])
+        return wrap_pi(rows) if wrap else rows
+
+    return TeamErrors(
+        t=t, pairs=pairs, phase=errors(phase, True), phase_path=errors(path, True),
+        workload=errors(work, False), workload_agents=errors(seen_workload, False),
+        phase_agents=errors(seen_phase, True), ids=list(range(n)),
+        live=np.ones(s.shape, dtype=bool))
+
+
+def ring_visit_gaps(t: np.ndarray, s: np.ndarray, d: np.ndarray, direction: np.ndarray,
+                    edge: RingEdge, t_from: float, t_to: float
+                    ) -> tuple[np.ndarray, list[np.ndarray | None], np.ndarray]:
+    """Points every POINT_STEP_M round the ring and, per point, the gaps between its
+    visits in [t_from, t_to] and its worst idleness there: a visit is a crossing of the
+    contour within the robot radius, round the ring, one per robot sweep."""
+    visit_t, visit_s, group = [np.empty(0)], [np.empty(0)], [np.empty(0, np.int64)]
+    for j in range(s.shape[0]):
+        tc, sc = crossings(t, s[j], d[j])
+        sweep = j * 1_000_000 + sweep_index(t, direction[j], tc)
+        wrapped = np.mod(sc, edge.length)
+        for turn in (-1.0, 0.0, 1.0):  # a visit near s = 0 is near s = L too
+            visit_t.append(tc)
+            visit_s.append(wrapped + turn * edge.length)
+            group.append(sweep)
+    count = max(1, int(math.floor(edge.length / POINT_STEP_M)))
+    points = np.arange(count) * (edge.length / count)
+    visits = point_visits(points, np.concatenate(visit_t), np.concatenate(visit_s),
+                          edge.robot_radius, VISIT_MERGE_S, np.concatenate(group))
+    gaps: list[np.ndarray | None] = []
+    for times in visits:
+        inside = times[(times >= t_from) & (times <= t_to)]
+        gaps.append(np.diff(inside) if inside.size >= 2 else None)
+    worst = np.array([worst_idleness(v, t_from, t_to, float(t[0])) for v in visits])
+    return points, gaps, worst
+
+
+def ring_measures(t: np.ndarray, s: np.ndarray, d: np.ndarray, lo: np.ndarray,
+                  hi: np.ndarray, direction: np.ndarray, seen_phase: np.ndarray,
+                  seen_workload: np.ndarray, edge: RingEdge) -> dict[str, float]:
+    """Every measure of a ring's run, as ``report.measures.team_measures`` gives a
+    chain's: errors and their steady state over the last quarter, revisit over the
+    second half against the closed edge's optimum L / (n v) (``revisit_worst_ratio``)
+    and, beside it, against a partitioned back-and-forth patrol's 2 L / (n v)
+    (``revisit_worst_ratio_partition``), which is what robots that each sweep their own
+    arc to and fro can reach at best."""
+    errors = ring_errors(t, s, d, lo, hi, direction, seen_phase, seen_workload, edge)
+    out = error_measures(errors, edge.total_workload)
+    t_from, t_to = revisit_window(t)
+    _, gaps, worst = ring_visit_gaps(t, s, d, direction, edge, t_from, t_to)
+    n = s.shape[0]
+    rate = sweep_rate([(t, s[j]) for j in range(n)], t_from, t_to,
+                      [(t, direction[j]) for j in range(n)])
+    out.update(idleness_measures(gaps, t_from, t_to, rate, edge.length, closed=True,
+                                 worst_per_point=worst))
+    out["revisit_worst_ratio_partition"] = out["revisit_worst_ratio"] / 2.0
+    out["edge_length_m"] = edge.length
+    still_from = float(t[0] + 0.75 * (t[-1] - t[0]))
+    out["still_frac_max"] = nanmax(np.asarray(
+        [still_fraction(t, s[j], d[j], still_from) for j in range(n)]))
+    return out
+
+
+def ring_figures(gmap: object, t: np.ndarray, x: np.ndarray, y: np.ndarray,
+                 errors: TeamErrors, lo: np.ndarray, mean_workload: float,
+                 out_dir: object) -> list[str]:
+    """``map.png`` (the floe, its closed contour, each robot's arc at the end and its
+    track over the last eighth of the run) and ``errors.png`` (phase and relative
+    workload error of every pair round the ring against time); the files' names."""
+    from pathlib import Path
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from simworld.maps import GridMap
+
+    assert isinstance(gmap, GridMap)
+    out = Path(str(out_dir))
+    edge = gmap.closed_edge
+    colours = plt.get_cmap("tab10")
+    fig, ax = plt.subplots(figsize=(7, 7))
+    kind = gmap.ice.astype(int) + gmap.algae.astype(int)
+    palette = np.array([[0.55, 0.7, 1.0], [1.0, 1.0, 1.0], [0.45, 0.85, 0.45]])
+    ax.imshow(palette[kind], origin="lower",
+              extent=(0.0, gmap.width_m, gmap.y_bottom, gmap.y_top))
+    pts = np.asarray(edge.points + edge.points[:1])
+    ax.plot(pts[:, 0], pts[:, 1], color="k", lw=1.0, label="closed edge (s = 0 at the dot)")
+    ax.plot(*edge.points[0], "ko", ms=4)
+    n = x.shape[0]
+    tail = slice(int(0.875 * t.size), None)
+    for i in range(n):
+        ax.plot(x[i, tail], y[i, tail], color=colours(i % 10), lw=0.6, label=f"robot {i}")
+        bx, by = edge.at(float(lo[i, -1]), 0.0)
+        nx, ny = edge.at(float(lo[i, -1]), 1.2)
+        ox, oy = edge.at(float(lo[i, -1]), -1.2)
+        ax.plot([ox, nx], [oy, ny], color=colours(i % 10), lw=2.0)
+        ax.plot(bx, by, "o", color=colours(i % 10), ms=5)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(f"{gmap.name}\n{n} robots; bars: where each arc starts at the end", fontsize=9)
+    ax.legend(loc="upper right", fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "map.png", dpi=110)
+    plt.close(fig)
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    for p, (a, b) in enumerate(errors.pairs):
+        a1.plot(errors.t, errors.phase[p], lw=0.6, label=f"{a}-{b}")
+        if mean_workload > 0:
+            a2.plot(errors.t, 100.0 * errors.workload[p] / mean_workload, lw=0.6)
+    a1.set_ylabel("phase error (rad)")
+    a1.legend(fontsize=7, ncol=4)
+    a2.set_ylabel("workload error (% of mean)")
+    a2.set_xlabel("t (s)")
+    a1.set_title("every neighbour pair round the ring, the pair (n-1, 0) included")
+    fig.tight_layout()
+    fig.savefig(out / "errors.png", dpi=110)
+    plt.close(fig)
+    return ["map.png", "errors.png"]
