@@ -193,10 +193,12 @@ class LocalizerNode:
         while len(self.scans) > KEEP_TICKS:
             self.scans.pop(min(self.scans))
 
+    POLL_S = 0.05  # the longest the loop waits for a message before it looks again
+
     def run(self) -> None:
         while not self.stopping:
             try:
-                kind, data = self.events.get(timeout=0.05)
+                kind, data = self.events.get(timeout=self.POLL_S)
                 if kind == "stop":
                     break
                 self._handle(kind, data)
@@ -207,8 +209,12 @@ class LocalizerNode:
                     self._handle(kind, data)
             except queue.Empty:
                 pass
-            while (k := self._ready(time.monotonic())) is not None:
-                self.process(k)
+            self.step(time.monotonic())
+
+    def step(self, now: float) -> None:
+        """Process every tick that is ready."""
+        while (k := self._ready(now)) is not None:
+            self.process(k)
 
     def close(self) -> None:
         self.token.undeclare()
@@ -260,8 +266,7 @@ class MeasuredTimingNode(LocalizerNode):
         except DecodeError as exc:
             self._drop(key, str(exc))
 
-    def _ready(self, now: float) -> int | None:
-        return None  # ``step`` below decides
+    POLL_S = 0.02  # poses are due on every sensing tick, 0.1 s apart
 
     def step(self, now: float) -> None:
         tl, dt = self.timeline, self.dt
@@ -309,21 +314,6 @@ class MeasuredTimingNode(LocalizerNode):
             self.pub_pose[i].put(encode(Pose(k * dt, k, i, x, y, theta,
                                              [e.var_x, e.var_y, e.var_theta], "pf")))
 
-    def run(self) -> None:
-        while not self.stopping:
-            try:
-                kind, data = self.events.get(timeout=0.02)
-                if kind == "stop":
-                    break
-                self._handle(kind, data)
-                while True:
-                    kind, data = self.events.get_nowait()
-                    if kind == "stop":
-                        return
-                    self._handle(kind, data)
-            except queue.Empty:
-                pass
-            self.step(time.monotonic())
 
 
 def main(argv: list[str] | None = None) -> int:
