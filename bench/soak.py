@@ -44,9 +44,11 @@ DEFAULT_MAP = "half-algae"
 def process_name(cmdline: list[str]) -> str:
     """A reading's name: ``agent 2``, ``world``, ``recorder``, ``router``, ``launcher``;
     ``other`` for anything else below the launcher."""
-    if "btrack" not in "".join(cmdline[:2]) and not any(a.endswith("btrack") for a in cmdline):
+    at = next((i for i, a in enumerate(cmdline) if a == "btrack" or a.endswith("/btrack")),
+              None)  # ``python -m btrack ...`` or ``.venv/bin/btrack ...``
+    if at is None:
         return "other"
-    args = cmdline[next(i for i, a in enumerate(cmdline) if a.endswith("btrack")) + 1:]
+    args = cmdline[at + 1:]
     sub = args[0] if args else ""
     if sub == "agent" and "--id" in args:
         return f"agent {args[args.index('--id') + 1]}"

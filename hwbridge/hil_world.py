@@ -160,9 +160,8 @@ class HilWorld(WorldShell):
         step nearest that time."""
         seen_at = time.monotonic() - SWEEP_MIDDLE_S
         with self.lock:
-            robots = [self.world.truth(i)[:2] for i in range(self.n)]
-            if self.history:
-                robots = min(self.history, key=lambda h: abs(h[0] - seen_at))[1]
+            robots = (min(self.history, key=lambda h: abs(h[0] - seen_at))[1] if self.history
+                      else [self.world.truth(i)[:2] for i in range(self.n)])
         return scan_ranges(self.laser, self.bearings, robots, ROBOT_RADIUS_M,
                            self.geometry.range_max_m)
 

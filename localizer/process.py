@@ -231,12 +231,11 @@ class MeasuredTimingNode(LocalizerNode):
         super().__init__(*args, **kwargs)
         self.dt: float | None = None
         self.timeline: OdometryTimeline | None = None
-        self.pending: list[Scan] = []  # scans not yet taken in, by time
+        self.pending: list[tuple[Scan, float]] = []  # not yet taken in, by time: (scan, came)
         self.estimates: list[Estimate] | None = None
-        self.sensed: dict[int, set[int]] = {}  # tick -> robots whose sensing is in
-        self.sensed_at: dict[int, float] = {}  # tick -> when its first sensing came
+        # tick -> (when its first sensing came, the robots whose sensing is in)
+        self.sensed: dict[int, tuple[float, set[int]]] = {}
         self.last_pose_k = -1
-        self.scan_seen: dict[int, float] = {}  # id of a pending scan -> when it came
         self.stale_scans = 0  # measured before a scan already taken in
 
     def _handle(self, kind: str, data: tuple[str, bytes]) -> None:
@@ -246,9 +245,8 @@ class MeasuredTimingNode(LocalizerNode):
                 scan = decode(Scan, payload)
                 if scan.scanners != 1:
                     raise DecodeError("measured timing takes one scanner")
-                self.pending.append(scan)
-                self.pending.sort(key=lambda s: s.t)
-                self.scan_seen[id(scan)] = time.monotonic()
+                self.pending.append((scan, time.monotonic()))
+                self.pending.sort(key=lambda p: p[0].t)
                 return
             sense = decode(Sense, payload)
             if sense.robot != Keys.robot_of(key):
@@ -261,8 +259,7 @@ class MeasuredTimingNode(LocalizerNode):
             taken = self.timeline.add(sense.k, sense.robot, sense.odom_dist_m,
                                       sense.odom_dtheta)
             if taken and sense.k > self.last_pose_k:  # else too late for its tick's pose
-                self.sensed.setdefault(sense.k, set()).add(sense.robot)
-                self.sensed_at.setdefault(sense.k, time.monotonic())
+                self.sensed.setdefault(sense.k, (time.monotonic(), set()))[1].add(sense.robot)
         except DecodeError as exc:
             self._drop(key, str(exc))
 
@@ -273,18 +270,15 @@ class MeasuredTimingNode(LocalizerNode):
         if tl is None or dt is None:
             return
         while self.pending:
-            scan = self.pending[0]
+            scan, came = self.pending[0]
             until = scan.t / dt
             if until < tl.at:
                 self.pending.pop(0)
-                self.scan_seen.pop(id(scan), None)
                 self.stale_scans += 1
                 continue
-            waited = now - self.scan_seen.get(id(scan), now)
-            if not tl.complete(until) and waited < self.sense_timeout:
+            if not tl.complete(until) and now - came < self.sense_timeout:
                 break
             self.pending.pop(0)
-            self.scan_seen.pop(id(scan), None)
             dist, dtheta = tl.take(until)
             began = time.perf_counter()
             self.estimates = self.core.step_scans(
@@ -292,8 +286,9 @@ class MeasuredTimingNode(LocalizerNode):
             self.update_s += time.perf_counter() - began
             self.scans_done += 1
         for k in sorted(self.sensed):
-            whole = len(self.sensed[k]) == self.n
-            if not whole and now - self.sensed_at[k] < self.sense_timeout:
+            came, robots = self.sensed[k]
+            whole = len(robots) == self.n
+            if not whole and now - came < self.sense_timeout:
                 break
             if not whole:
                 self.late += 1
@@ -303,7 +298,6 @@ class MeasuredTimingNode(LocalizerNode):
         tl, dt = self.timeline, self.dt
         assert tl is not None and dt is not None
         self.sensed.pop(k, None)
-        self.sensed_at.pop(k, None)
         self.last_pose_k = k
         if self.estimates is None:
             return  # no scan yet: no pose

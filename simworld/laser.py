@@ -92,13 +92,7 @@ class Laser:
 
     def _segment(self, px: float, py: float, ex: float, ey: float) -> np.ndarray:
         """Range along every beam to the segment p + s e, s in [0, 1] (inf if missed)."""
-        ux, uy = self._dirs[:, 0], self._dirs[:, 1]
-        den = ux * ey - uy * ex
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (px * ey - py * ex) / den
-            s = (px * uy - py * ux) / den
-        ok = (np.abs(den) > 1e-12) & (t > 0.0) & (s >= 0.0) & (s <= 1.0)
-        return np.where(ok, t, np.inf)
+        return ray_segment(self._dirs[:, 0], self._dirs[:, 1], px, py, ex, ey)
 
     def scan(self, centres: npt.ArrayLike) -> list[float]:
         """One noisy scan: ranges in metres, millimetre resolution, misses at max."""
@@ -111,6 +105,18 @@ class Laser:
 
 
 Segment = tuple[float, float, float, float]
+
+
+def ray_segment(ux: np.ndarray, uy: np.ndarray, px: float, py: float, ex: float, ey: float
+                ) -> np.ndarray:
+    """Range along rays (ux, uy) from the origin to the segment p + s e, s in [0, 1] (inf
+    where a ray misses it or runs parallel to it)."""
+    den = ux * ey - uy * ex
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (px * ey - py * ex) / den
+        s = (px * uy - py * ux) / den
+    ok = (np.abs(den) > 1e-12) & (t > 0.0) & (s >= 0.0) & (s <= 1.0)
+    return np.where(ok, t, np.inf)
 
 
 def scanner_count(edge_lo: float, edge_hi: float) -> int:

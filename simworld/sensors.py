@@ -55,7 +55,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from simworld.kinematics import integrate_arc
-from simworld.laser import Laser
+from simworld.laser import Laser, ray_segment
 
 PROFILES = ("ideal", "lab")
 
@@ -323,7 +323,7 @@ class LabLaser:
             hit = _circle(ux, uy, legs[..., 0] - s.x, legs[..., 1] - s.y, self.walker.leg_radius)
             out = np.minimum(out, hit.min(axis=-1))
         for x0, y0, x1, y1 in self.laser.walls:
-            out = np.minimum(out, _segment(ux[..., 0], uy[..., 0], x0 - s.x, y0 - s.y,
+            out = np.minimum(out, ray_segment(ux[..., 0], uy[..., 0], x0 - s.x, y0 - s.y,
                                            x1 - x0, y1 - y0))
         return np.minimum(out, s.range_max)
 
@@ -350,16 +350,6 @@ def _circle(ux: np.ndarray, uy: np.ndarray, cx: np.ndarray | float, cy: np.ndarr
     inside = np.asarray(radius) ** 2 - miss2
     tt = along - np.sqrt(np.maximum(inside, 0.0))
     return np.where((inside >= 0.0) & (along > 0.0) & (tt >= 0.0), tt, np.inf)
-
-
-def _segment(ux: np.ndarray, uy: np.ndarray, px: float, py: float, ex: float, ey: float
-             ) -> np.ndarray:
-    den = ux * ey - uy * ex
-    with np.errstate(divide="ignore", invalid="ignore"):
-        tt = (px * ey - py * ex) / den
-        ss = (px * uy - py * ux) / den
-    ok = (np.abs(den) > 1e-12) & (tt > 0.0) & (ss >= 0.0) & (ss <= 1.0)
-    return np.where(ok, tt, np.inf)
 
 
 # --- ice and algae sensors -------------------------------------------------------------
