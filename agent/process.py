@@ -35,6 +35,7 @@ from wire.session import add_session_args, declare_publisher, open_session, opti
 
 DEFAULT_LEASE_S = 1.0  # lease an agent announces unless told otherwise
 PARKED_STATES = 256  # neighbour states kept for ticks we have no sensing of yet, at most
+COPIES_PARKED = 4  # unlike states of one neighbour's tick kept to be judged, at most
 MEMBERS_TIMEOUT_S = 2.0  # how long the start-up question "who is alive?" may take
 
 
@@ -94,7 +95,7 @@ class AgentNode:
         self.bounds: plausible.Bounds | None = None
         self.newest_k = -1
         self.claims: dict[int, plausible.Claim] = {}
-        self.parked: dict[tuple[int, int], tuple[str, AgentState]] = {}
+        self.parked: dict[tuple[int, int], list[tuple[str, AgentState]]] = {}
         self.controller: Controller | None = None
         self.stopping = False
         self.pub_state = declare_publisher(session, keys.state(robot))
@@ -212,12 +213,21 @@ class AgentNode:
                 return
         if state.k > self.newest_k:
             # A state of a tick whose sensing we do not have yet waits here until we do
-            # (a later copy replaces it: the real one comes after a forgery sent ahead of
-            # time) and is judged then, against its sender's previous state: a state sent
-            # early cannot stand in for the real one when the tick comes. Nothing acts on
-            # a neighbour's state of tick k before our own tick k+1.
-            if (state.robot, state.k) in self.parked or len(self.parked) < PARKED_STATES:
-                self.parked[(state.robot, state.k)] = (key, state)
+            # and is judged then, against its sender's previous state: a state sent early
+            # cannot stand in for the real one when the tick comes. Nothing acts on a
+            # neighbour's state of tick k before our own tick k+1. Every unlike copy of
+            # a tick waits (a forgery may come before the real state or after it, and
+            # neither may displace the other) and each is judged in turn.
+            rk = (state.robot, state.k)
+            held = self.parked.setdefault(rk, [])
+            if any(state == other for _, other in held):
+                return
+            if len(held) >= COPIES_PARKED or len(self.parked) > PARKED_STATES:
+                if not held:
+                    del self.parked[rk]
+                self._reject(key, f"too many states wait for tick {state.k}")
+                return
+            held.append((key, state))
             return
         lower, upper = self.membership.neighbours()
         side = "lower" if state.robot == lower else "upper" if state.robot == upper else None
@@ -240,8 +250,8 @@ class AgentNode:
         them, at the first Sense; those still ahead are parked again), in tick order."""
         due = sorted(rk for rk in self.parked if every or rk[1] <= self.newest_k)
         for rk in due:
-            key, state = self.parked.pop(rk)
-            self._judge(key, state)
+            for key, state in self.parked.pop(rk):
+                self._judge(key, state)
 
     def _bounds(self, sense: Sense) -> plausible.Bounds:
         p = self.patrol_cfg
