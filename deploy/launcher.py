@@ -50,6 +50,7 @@ from wire.session import (
     declare_publisher,
     loopback_options,
 )
+from wire.tickorder import TickOrder
 
 MAX_ROBOTS = 100  # one machine's processes: beyond this a run fails slowly, not at once
 PROGRESS_QUERY_S = 0.5  # longest wait for the recorder's answer to a progress query
@@ -212,7 +213,7 @@ class Injector:
         self.gone: set[int] = set()  # pids killed on purpose: not a failure
         self.starts: dict[int, int] = {}
         self.t = 0.0
-        self._last_k: int | None = None
+        self._order: TickOrder[Tick] = TickOrder()
         self.refused = 0  # ticks refused as implausible
         self.wake = threading.Event()
         self.pub = declare_publisher(session, keys.fault())
@@ -226,14 +227,17 @@ class Injector:
             tick = decode(Tick, sample.payload.to_bytes())
         except DecodeError:
             return
-        # Only the next tick moves the clock the faults are timed by: a forged tick from
-        # the far future would fire every fault at once.
-        if (self._last_k is not None and tick.k != self._last_k + 1) or abs(
-                tick.t - tick.k * WORLD_DT_S) > 1e-6 * max(1.0, tick.t):
+        # Only ticks in order (wire.tickorder) move the clock the faults are timed by: a
+        # forged tick from the far future would fire every fault at once, and a lost one
+        # must not stop the clock for the rest of the run.
+        if abs(tick.t - tick.k * WORLD_DT_S) > 1e-6 * max(1.0, tick.t):
             self.refused += 1
             return
-        self._last_k = tick.k
-        self.t = max(self.t, tick.t)
+        out = self._order.offer(tick.k, tick)
+        self.refused += len(out.refused)
+        if not out.taken:
+            return
+        self.t = max(self.t, out.taken[-1].t)
         if tick.t >= self._next_at:
             self.wake.set()
 

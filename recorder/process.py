@@ -88,6 +88,7 @@ def run(out: Path, opts: SessionOptions, drain_s: float = 0.3) -> dict[str, int]
                 alive_sub.undeclare()
                 subscriber.undeclare()
     finally:
+        recording.finish()
         writer.close()
     return recording.summary()
 

@@ -20,6 +20,7 @@ from recorder import topics
 from wire.codec import DecodeError, decode
 from wire.keys import Keys
 from wire.messages import AgentState, Progress, Tick, WorldInfo
+from wire.tickorder import TickOrder
 
 _dumps = json.JSONEncoder(separators=(",", ":"), allow_nan=False).encode
 
@@ -88,6 +89,8 @@ class Recording:
         self.info: WorldInfo | None = None  # the run's first WorldInfo
         self._state_bounds: plausible.Bounds | None = None  # what states are judged by
         self.last_tick: Tick | None = None
+        # the world's ticks in order; each with what recording it needs
+        self._order: TickOrder[tuple[str, int, Tick, bytes, int]] = TickOrder()
         self.done = False  # a Tick with done=True has been written
         self.last_t_ns = 0  # the latest simulation time seen, for messages without one
         self._routes: dict[str, tuple[type | None, int]] = {}
@@ -125,6 +128,29 @@ class Recording:
         if why is not None:
             self.record_invalid(topic, why, payload, log_ns, topics.REJECTED_PREFIX)
             return
+        if cls is Tick:
+            self._handle_tick(topic, cid, msg, payload, log_ns)
+            return
+        self._write(cls, cid, msg, log_ns)
+
+    def _handle_tick(self, topic: str, cid: int, tick: Tick, payload: bytes,
+                     log_ns: int) -> None:
+        """Ticks in order (wire.tickorder): a lost tick is gone past, a forged one
+        refused; a tick that skips ahead waits for its own next."""
+        out = self._order.offer(tick.k, (topic, cid, tick, payload, log_ns), final=tick.done)
+        self._refuse_ticks(out.refused)
+        for _, c, t, _, log in out.taken:
+            self._write(Tick, c, t, log)
+
+    def _refuse_ticks(self, refused: list[tuple[tuple[str, int, Tick, bytes, int], str]]) -> None:
+        for (topic, _, _, payload, log_ns), why in refused:
+            self.record_invalid(topic, why, payload, log_ns, topics.REJECTED_PREFIX)
+
+    def finish(self) -> None:
+        """The run is over: a tick still waiting for its next is refused."""
+        self._refuse_ticks(self._order.finish())
+
+    def _write(self, cls: type, cid: int, msg: Any, log_ns: int) -> None:
         fields: dict[str, Any] = msg.__dict__
         t = fields.get("t")
         if t is not None:
@@ -158,15 +184,14 @@ class Recording:
             return None
         info = self.info
         if isinstance(msg, Tick):
-            last = self.last_tick.k if self.last_tick else None
-            if last is not None and msg.k != last + 1:
-                return f"tick {msg.k} after tick {last}: not the next one"
-            if info is not None:
+            if info is not None:  # its order is judged in _handle_tick
                 if abs(msg.t - msg.k * info.dt) > 1e-6 * max(1.0, msg.t):
                     return f"t = {msg.t:g} s is not tick {msg.k} of {info.dt:g} s"
                 final = round(info.duration_s / info.dt) - 1
                 # A world on the wall clock ends when its time is up: near, not at, it.
                 slack = REALTIME_END_SLACK_TICKS if info.realtime else 0
+                if msg.k > final + slack:
+                    return f"tick {msg.k} after the run's last tick, {final}"
                 if msg.done and msg.k < final - slack:
                     return f"done at tick {msg.k}; the run's last tick is {final}"
             return None
@@ -237,5 +262,5 @@ class Recording:
     def summary(self) -> dict[str, int]:
         last = self.last_tick
         return {"messages": self.messages, "invalid": self.invalid, "rejected": self.rejected,
-                "done": self.done, "ticks": self.ticks,
+                "done": self.done, "ticks": self.ticks, "lost_ticks": self._order.lost,
                 "last_k": -1 if last is None else last.k}
