@@ -15,8 +15,12 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/btrack sim --robots 3 --map half-algae --start ahead:1 --out runs/demo
 
+# Two workers, each taking whole files (a module's team fixture runs once): most tests
+# wait on processes of their own, so two at a time keep two cores busy.
+TEST_WORKERS ?= 2
+
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
