@@ -71,7 +71,7 @@ def synthetic_messages(
     if not hardware:
         yield "world/info", encode(info), wall0
     steps = round(duration_s / dt)
-    for k in range(steps + 1):
+    for k in range(steps):  # as the world: ticks 0 to steps - 1, the last one done
         t = k * dt
         log_ns = wall0 + int(t / speedup * 1e9)
         poses: list[tuple[float, float, float]] = []
@@ -109,7 +109,7 @@ def synthetic_messages(
         if hardware:
             continue
         yield "world/truth", encode(Truth.of_team(t, k, poses)), log_ns
-        tick = Tick(t=t, k=k, live=list(range(robots)), done=k == steps)
+        tick = Tick(t=t, k=k, live=list(range(robots)), done=k == steps - 1)
         yield "world/tick", encode(tick), log_ns
 
 

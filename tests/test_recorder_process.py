@@ -247,7 +247,7 @@ def test_a_sigkilled_recorders_file_is_reported_as_cut_short(tmp_path: Path) -> 
                         congestion_control=zenoh.CongestionControl.BLOCK)
             if topic == "world/tick":
                 sent_k += 1
-                if sent_k == 2000:  # of 3001: the run is two thirds through
+                if sent_k == 2000:  # of 3000: the run is two thirds through
                     break
         ask_progress(session, keys, lambda p: p.k >= 1999)
         proc.send_signal(signal.SIGKILL)

@@ -47,7 +47,7 @@ def test_report_writes_summary_figures_and_markdown(tmp_path: Path) -> None:
     text = (tmp_path / "report.md").read_text()
     assert all(name in text for name in figures)
     assert summary["map"] == "synthetic" and summary["robots"] == 3
-    assert summary["ticks"] == 601
+    assert summary["ticks"] == summary["ticks_expected"] == 600
     assert summary["invalid_messages"] == 3
     assert summary["speedup"] == pytest.approx(100.0, rel=1e-3)
     # the synthetic offset of 2 pi / 5 decays with an 8 s time constant: inside the
