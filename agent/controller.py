@@ -22,6 +22,7 @@ from agent.phase import (
     position_to_phase,
     wrap_pi,
 )
+from agent.plausible import edge_bins
 from agent.ring import ring_bins
 from agent.team import TeamRate, chain_max, cycle_for, passes_for, team_max
 
@@ -152,8 +153,9 @@ class Controller:
         cfg = patrol or PatrolConfig()
         self.edge = (edge_lo, edge_hi)
         self.lo, self.hi = lo, hi
-        if ring_length is None:
-            self.depth_map = DepthMap(edge_lo, cfg.bin_m, cfg.min_depth_m)
+        if ring_length is None:  # its bins as the listeners of its states count them
+            self.depth_map = DepthMap(edge_lo, cfg.bin_m, cfg.min_depth_m,
+                                      bins=edge_bins(edge_lo, edge_hi, cfg.bin_m))
         else:
             self.depth_map = DepthMap(0.0, ring_bins(ring_length, cfg.bin_m), cfg.min_depth_m)
         self.patrol = Patrol(cfg, self.depth_map, x, direction=1)

@@ -56,6 +56,10 @@ class DepthMap:
     bin_m: float
     default_m: float
     keep: int = 3
+    # the edge's bins, 0 to bins - 1 (None: not bounded, a ring's map): a leg that
+    # strays past an end of the edge samples a bin off it, which it may plan with but
+    # never tell the neighbours of (they refuse a state naming a bin off the edge)
+    bins: int | None = None
     depths: dict[int, float] = field(default_factory=dict)
     samples: dict[int, list[float]] = field(default_factory=dict)
     recorded: int = 0  # samples recorded so far, over all bins
@@ -196,11 +200,13 @@ class DepthMap:
 
     def near_ends(self, lo: float, hi: float, reach_m: float) -> tuple[tuple[int, float], ...]:
         """This robot's own measured depths of the bins within ``reach_m`` of either end
-        of [lo, hi], for its neighbours."""
+        of [lo, hi] and on the edge, for its neighbours."""
         key = (self.version, self.bin_of(lo - reach_m), self.bin_of(lo + reach_m),
                self.bin_of(hi - reach_m), self.bin_of(hi + reach_m))
         if self._ends[0] != key:
             bins = set(range(key[1], key[2] + 1)) | set(range(key[3], key[4] + 1))
+            if self.bins is not None:
+                bins = {b for b in bins if 0 <= b < self.bins}
             self._ends = (key, tuple((b, self.depths[b]) for b in sorted(bins)
                                      if self.kind.get(b, SUSPECT) > SUSPECT))
         return self._ends[1]

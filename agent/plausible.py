@@ -35,6 +35,12 @@ TOL_M = 1e-6  # boundaries: rounding between two robots evaluating the same law
 NO_PASS_LIMIT = 1 << 30  # for a listener that does not know the patrol's spacing
 
 
+def edge_bins(edge_lo: float, edge_hi: float, bin_m: float) -> int:
+    """How many depth-map bins of ``bin_m`` the edge [edge_lo, edge_hi] has (0 to
+    this - 1; a last partial bin counts)."""
+    return math.ceil((edge_hi - edge_lo) / bin_m - 1e-9)
+
+
 @dataclass(frozen=True)
 class Bounds:
     """What the listener knows for sure: the edge (from its own sensing), the deepest
@@ -49,7 +55,7 @@ class Bounds:
 
     @property
     def bins(self) -> int:
-        return math.ceil((self.edge_hi - self.edge_lo) / self.bin_m - 1e-9)
+        return edge_bins(self.edge_lo, self.edge_hi, self.bin_m)
 
 
 @dataclass(frozen=True)

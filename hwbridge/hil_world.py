@@ -255,10 +255,11 @@ class HilWorld(WorldShell):
             if not self.running:
                 if self.ready():
                     self.running = True
-                    self.publish_info()
-                    next_info, end = now + INFO_EVERY_S, now + a.duration
                     k = tick_of(clock.t(), a.dt) + 1
                     next_tick = clock.mono_at(k * a.dt)
+                    self.first_k = k  # the recorder knows the run's last tick by it
+                    self.publish_info()
+                    next_info, end = now + INFO_EVERY_S, now + a.duration
                 elif now > deadline_start:
                     print(f"btrack bridge hil-world: {self.waiting_for()} not alive after "
                           f"{a.startup_timeout:g} s (live {sorted(self.live)})", file=sys.stderr)

@@ -187,7 +187,8 @@ class Recording:
             if info is not None:  # its order is judged in _handle_tick
                 if abs(msg.t - msg.k * info.dt) > 1e-6 * max(1.0, msg.t):
                     return f"t = {msg.t:g} s is not tick {msg.k} of {info.dt:g} s"
-                final = round(info.duration_s / info.dt) - 1
+                # (a hardware loop's ticks count from its epoch: it begins at first_k)
+                final = info.first_k + round(info.duration_s / info.dt) - 1
                 # A world on the wall clock ends when its time is up: near, not at, it.
                 slack = REALTIME_END_SLACK_TICKS if info.realtime else 0
                 if msg.k > final + slack:

@@ -67,6 +67,7 @@ class WorldShell:
         self.recorder_alive = False
         self.localizer_alive = False
         self.stopping = False
+        self.first_k = 0  # the run's first tick (WorldInfo.first_k)
         self.pub_tick = declare_publisher(session, keys.world_tick())
         self.pub_info = declare_publisher(session, keys.world_info())
         put = self.events.put
@@ -133,5 +134,5 @@ class WorldShell:
         self.pub_info.put(encode(WorldInfo(
             map=self.world.map.name,  # a procedural map's full spec, which rebuilds it
             start=a.start, robots=self.n, localization=self.localization, seed=a.seed,
-            duration_s=a.duration, dt=self.dt, realtime=self.realtime,
+            duration_s=a.duration, dt=self.dt, realtime=self.realtime, first_k=self.first_k,
             **self.world.info())))  # type: ignore[arg-type]

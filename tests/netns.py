@@ -127,13 +127,20 @@ class Site:
     def start(self, ns: str, name: str, args: list[str]) -> subprocess.Popen[bytes]:
         """``btrack ARGS`` inside namespace ``ns``; ``ip netns exec`` execs, so the pid
         is the Python process's own."""
+        return self.run(ns, name, [sys.executable, "-m", "btrack", *args],
+                        {**os.environ, "PYTHONUNBUFFERED": "1"})
+
+    def run(self, ns: str, name: str, argv: list[str], env: dict[str, str]
+            ) -> subprocess.Popen[bytes]:
+        """The command line ``argv`` inside namespace ``ns`` with exactly the environment
+        ``env`` (as systemd gives a unit its own), its output in the logs; ended by
+        ``close`` unless the caller has ended it before."""
         self.logs.mkdir(parents=True, exist_ok=True)
         with open(self.logs / f"{name}.log", "wb") as err, \
                 open(self.logs / f"{name}.out", "wb") as out:
-            proc = subprocess.Popen(
-                ["ip", "netns", "exec", ns, sys.executable, "-m", "btrack", *args],
-                stdin=subprocess.DEVNULL, stdout=out, stderr=err, start_new_session=True,
-                env={**os.environ, "PYTHONUNBUFFERED": "1"})
+            proc = subprocess.Popen(["ip", "netns", "exec", ns, *argv],
+                                    stdin=subprocess.DEVNULL, stdout=out, stderr=err,
+                                    start_new_session=True, env=env)
         self.procs.append(proc)
         return proc
 

@@ -32,6 +32,11 @@ def test_sim_hil_short_run(tmp_path: Path) -> None:
     assert summary["faults_injected"] > 0 and summary["serial_errors_total"] > 0
     assert summary["port_losses"] == 0  # the devices outlive the bridges at the end
     assert summary["scan_rate_hz"] > 0 and summary["world"]["ticks"] > 30
+    # every tick of the run recorded, the done one too, so the recorder ended by itself
+    # (its ticks count from the epoch: it once refused all after duration / dt)
+    recorder = json.loads((out / "logs" / "recorder.out").read_text().splitlines()[-1])
+    assert recorder["done"] and recorder["rejected"] == 0, recorder
+    assert recorder["ticks"] == summary["world"]["ticks"], (recorder, summary["world"])
     assert (out / "run.mcap").stat().st_size > 0
     # the recording names the map in full, so the report (or a rerun) rebuilds it
     from report.load import load_run

@@ -325,6 +325,27 @@ def test_neighbours_depths_fill_the_bins_a_robot_has_not_measured():
     assert upper.average(1.9, 2.0) == pytest.approx(0.85)
 
 
+def test_a_bin_off_the_edge_is_never_told_to_the_neighbours():
+    """A leg that strayed past the edge's start (a hardware run's robot 0, 8 mm, its
+    sample placed further out) sampled bin -1: every state its agent published after
+    named it among
+    its ends' depths, and its neighbour and the recorder refused them all (289 and 284
+    states, "a bin of its ends is off the edge's 60 bins"), so the neighbour waited for
+    it for the rest of the run. The map keeps the sample, and tells only the edge's
+    bins."""
+    from agent.plausible import Bounds, edge_bins
+
+    bins = edge_bins(0.0, 6.0, 0.1)
+    assert bins == Bounds(0.0, 6.0, 2.0, 0.1, 1).bins == 60
+    dm = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3, bins=bins)
+    for s, d in ((-0.05, 1.5), (0.05, 1.4), (5.95, 0.3), (6.05, 0.3)):
+        dm.record(s, d)
+    assert dm.known(-1) and dm.known(60)  # measured, for its own planning
+    assert dm.near_ends(0.0, 6.0, 0.3) == ((0, 1.4), (59, 0.3))
+    ctrl = Controller(0, 0.0, 2.0, 0.0, 6.0, 0.5)
+    assert ctrl.depth_map.bins == edge_bins(0.0, 6.0, ctrl.depth_map.bin_m)
+
+
 def test_a_gap_in_the_profile_matters_only_between_different_depths():
     dm = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3)
     for b in range(10):

@@ -215,6 +215,30 @@ def test_a_lost_tick_is_gone_past_and_forged_ones_are_refused(tmp_path: Path) ->
         done.stderr)
 
 
+def test_a_run_on_its_epochs_tick_grid_is_recorded_to_its_done_tick(tmp_path: Path) -> None:
+    """The hardware loop's ticks count from the run's epoch (as its bridges' Sense do),
+    so its run begins at the tick its team was up by: ``btrack sim --hil`` recorded 22 of
+    its 61 ticks and refused the rest, the done tick with them ("after the run's last
+    tick, 59"), and its recorder never ended by itself. WorldInfo says the first tick,
+    and the run's last is counted from it."""
+    with recorder_on_bus(tmp_path) as (proc, keys, session):
+        first = 4321
+        info = WorldInfo(map="no-algae", start="in-phase", robots=1, localization="pf",
+                         seed=1, duration_s=2.0, dt=0.1, edge_lo=0.0, edge_hi=6.0, bin_m=0.1,
+                         patrol_depth=[0.3] * 60, robot_radius=0.17, min_depth=0.3,
+                         margin_out=0.3, realtime=True, first_k=first)
+        session.put(keys.world_info(), encode(info))
+        for k in range(first, first + 20):
+            session.put(keys.world_tick(), encode(Tick(round(k * 0.1, 9), k, [0],
+                                                       done=k == first + 19)),
+                        congestion_control=zenoh.CongestionControl.BLOCK)
+        out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 0, err.decode()
+    summary = json.loads(out.decode().strip().splitlines()[-1])
+    assert (summary["done"], summary["ticks"], summary["rejected"]) == (True, 20, 0), summary
+    assert summary["last_k"] == first + 19
+
+
 def test_recorder_finishes_the_file_on_sigterm(tmp_path: Path) -> None:
     with recorder_on_bus(tmp_path) as (proc, keys, session):
         session.put(keys.world_tick(), encode(Tick(0.0, 0, [])))

@@ -300,11 +300,16 @@ class WorldInfo:
     # the local edge's y per bin from edge_lo (the bins of patrol_depth), m; empty for a
     # straight edge at y = 0, as every recording made before the field existed
     edge_y: list[float] = field(default_factory=list)
+    # the run's first tick: 0 in simulation; the hardware loop's ticks count from the
+    # run's epoch (as its bridges' do), so it begins at the tick its team was up by, and
+    # its last is first_k + duration_s / dt - 1
+    first_k: int = 0
 
     def check(self) -> None:
         _require(self.edge_lo < self.edge_hi and self.bin_m > 0, "bad edge or bin")
         _require(all(d >= 0 for d in self.patrol_depth), "negative patrol depth")
         _require(self.robots >= 1 and self.dt > 0, "bad robots or dt")
+        _require(self.first_k >= 0, "negative first tick")
         if self.edge_y:
             _require(len(self.edge_y) == len(self.patrol_depth),
                      "edge_y: one entry per patrol_depth bin")
