@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import pytest
 
 from tests.procutil import run_sim
@@ -12,8 +14,13 @@ def netns_teams_in_background(request, tmp_path_factory):
     """The cross-host teams of tests/test_netns.py, started at the session's first test
     when any of that file's tests is to run (and network namespaces are here): their two
     minutes on the wall clock pass while the rest of the suite runs. Each ends every
-    process it started, by pid, however the tests go."""
-    if not any(item.path.name == "test_netns.py" for item in request.session.items):
+    process it started, by pid, however the tests go.
+
+    Not under pytest-xdist: every worker collects every test, so each would start its
+    own pair of teams; there the worker given test_netns.py starts them (its ``teams``
+    fixture), while the other worker runs the rest of the suite."""
+    if os.environ.get("PYTEST_XDIST_WORKER") or not any(
+            item.path.name == "test_netns.py" for item in request.session.items):
         yield None
         return
     from tests import test_netns
