@@ -31,6 +31,20 @@ SUSPECT, ROUGH, PRECISE = 0, 1, 2
 WEIGHT = {PRECISE: 25.0, ROUGH: 1.0, SUSPECT: 1.0}
 SMOOTH_M = 0.05  # a depth sample is averaged with the samples this close to it
 AGREE_M = 0.05  # that measured within this of it (across a step they differ more)
+# The algae may change while the team patrols (issue 18). A sample of a kind that can
+# tell (not SUSPECT) more than STALE_M from its bin's depth (twice a tick at full speed,
+# 5 cm, and the edge's error together) says the algae may have changed: from then on
+# the whole map keeps only the last KEEP_POINTS_CHANGING samples per bin, and a sample
+# is stale after the team's cycle (``tick``, the time a sweep each way takes): the
+# profile takes a bin without a sample that recent from its neighbours (as one never
+# sampled), a neighbour's depth not told for that long is dropped, and the bin's depth
+# takes its next sample of any kind. With the bin's next such sample off the same way
+# (one alone may be a leg that strayed across a step), the algae there did change: the
+# bin forgets at once its samples of before, of whatever kind, that disagree with the
+# new one. On a map that does not change none of this happens (the thesis's twelve
+# cases give the same summaries, field for field), and the map keeps KEEP_POINTS.
+STALE_M = 0.1
+KEEP_POINTS_CHANGING = 3
 
 
 @dataclass
@@ -68,10 +82,11 @@ class DepthMap:
     # per bin, the in-legs' crossings of the ice edge: (x, y, weight), WEIGHT's
     crossings: dict[int, list[tuple[float, float, float]]] = field(default_factory=dict)
     _edges: dict[int, tuple[float, float, float] | None] = field(default_factory=dict)  # fits
-    # bin -> its last KEEP_POINTS samples as (s, depth, kind, top_y), the kind before
+    # bin -> its last KEEP_POINTS samples as (s, depth, kind, top_y, t), the kind before
     # a sample near the bin's side is marked SUSPECT (its place is known here); top_y
-    # where the algae ended (None: a depth not measured from the edge, the minimum)
-    points: dict[int, list[tuple[float, float, int, float | None]]] = field(
+    # where the algae ended (None: a depth not measured from the edge, the minimum); t
+    # the map's clock when it was taken
+    points: dict[int, list[tuple[float, float, int, float | None, float]]] = field(
         default_factory=dict)
     version: int = 0  # counts every sample recorded and shared depth changed, for caches
     # the profile ``average`` integrates, built for one version: (version, where each
@@ -79,6 +94,14 @@ class DepthMap:
     _integral: tuple[int, list[float], list[float], list[float]] = (-1, [], [], [])
     _learned: tuple[object, object] = (None, None)  # the last two tuples learned
     _ends: tuple[object, tuple[tuple[int, float], ...]] = (None, ())  # near_ends's, by key
+    # bin -> a sample that disagreed with the bin's depth by more than STALE_M, waiting
+    # for the next to say whether the algae changed there
+    pending: dict[int, float] = field(default_factory=dict)
+    changing: bool = False  # the algae was seen to change: keep KEEP_POINTS_CHANGING
+    now: float = 0.0  # the map's clock, s: the time its controller has run (``tick``)
+    horizon_s: float = math.inf  # once changing, samples older than this are stale
+    sampled_t: dict[int, float] = field(default_factory=dict)  # bin -> its depth's latest
+    shared_t: dict[int, float] = field(default_factory=dict)  # bin -> last told, once changing
 
     def bin_of(self, s: float) -> int:
         return int(math.floor((s - self.edge_lo) / self.bin_m))
@@ -94,14 +117,21 @@ class DepthMap:
         if ``depth`` was measured from the ice edge (the profile measures it again from
         the edge known then, never below ``default_m``, the patrol's minimum depth)."""
         b = self.bin_of(s)
-        placed = self.points.setdefault(b, [])
-        placed.append((s, depth, kind, top_y))
-        del placed[:-KEEP_POINTS]
-        self.version += 1
         offset = s - self.edge_lo - b * self.bin_m
-        if min(offset, self.bin_m - offset) < SIDE_M:
+        on_side = min(offset, self.bin_m - offset) < SIDE_M
+        changed = self._changed(b, depth, SUSPECT if on_side else kind)
+        placed = self.points.setdefault(b, [])
+        if changed:
+            placed[:] = [p for p in placed if abs(p[1] - depth) <= STALE_M]
+        placed.append((s, depth, kind, top_y, self.now))
+        del placed[:-(KEEP_POINTS_CHANGING if self.changing else KEEP_POINTS)]
+        self.version += 1
+        if on_side:
             kind = SUSPECT
         best = self.kind.get(b, -1)
+        if changed or (self.changing and self.now - self.sampled_t.get(b, self.now)
+                       > self.horizon_s):  # the samples of before, of any kind, are stale
+            best = -1
         if kind < best:
             return
         if kind > best:
@@ -114,9 +144,63 @@ class DepthMap:
         if len(ordered) >= 3:
             ordered = ordered[1:-1]
         self.depths[b] = sum(ordered) / len(ordered)
+        self.sampled_t[b] = self.now
         self.recorded += 1
         if kind > SUSPECT:
             self.last_seen[b] = self.recorded
+
+    def _begin_changing(self) -> None:
+        """The algae was seen to change: from now on every bin keeps only its last
+        KEEP_POINTS_CHANGING samples, and samples age out after ``horizon_s``."""
+        if not self.changing:
+            self.changing = True
+            for placed in self.points.values():
+                del placed[:-KEEP_POINTS_CHANGING]
+            self.shared_t = dict.fromkeys(self.shared, self.now)
+            self.version += 1
+
+    def tick(self, dt: float, horizon_s: float) -> None:
+        """The controller's tick of ``dt``: the map's clock runs on, and once the algae
+        was seen to change, samples older than ``horizon_s`` (the team's cycle) leave
+        the profile, unless none newer is left anywhere (a robot that sampled nothing
+        for a cycle)."""
+        self.now += dt
+        self.horizon_s = horizon_s
+        if not self.changing:
+            return
+        before = self.now - horizon_s
+        stale = [b for b in self.shared if self.shared_t.get(b, -math.inf) < before]
+        for b in stale:  # a neighbour's depth of a bin it no longer tells of
+            del self.shared[b]
+            self.version += 1
+        if not any(p[4] < before for placed in self.points.values() for p in placed):
+            return
+        if not any(p[4] >= before for placed in self.points.values() for p in placed):
+            return
+        for b in list(self.points):
+            self.points[b] = [p for p in self.points[b] if p[4] >= before]
+            if not self.points[b]:
+                del self.points[b]
+        self.version += 1
+
+    def _changed(self, b: int, depth: float, kind: int) -> bool:
+        """Whether this sample (of ``kind``, SUSPECT on a bin's side) confirms that the
+        algae at bin ``b`` changed: it and the bin's last sample that disagreed with the
+        bin's depth both differ from it by more than STALE_M, the same way."""
+        known = self.depths.get(b)
+        if kind == SUSPECT or known is None or self.kind.get(b, SUSPECT) == SUSPECT:
+            return False
+        gap = depth - known
+        if abs(gap) <= STALE_M:
+            self.pending.pop(b, None)
+            return False
+        self._begin_changing()  # one sample says the algae changed: stale samples age out
+        before = self.pending.get(b)
+        if before is None or (before - known) * gap <= 0.0:
+            self.pending[b] = depth
+            return False
+        del self.pending[b]
+        return True
 
     def known(self, b: int) -> bool:
         """Whether bin ``b``'s depth is measured (not only on its side) or shared."""
@@ -186,6 +270,9 @@ class DepthMap:
 
     def learn(self, depths: tuple[tuple[int, float], ...]) -> None:
         """A neighbour's published depths of the bins near its ends."""
+        if self.changing:  # what a neighbour still tells is not stale
+            for b, _ in depths:
+                self.shared_t[b] = self.now
         if depths in self._learned:  # as last tick's: most ticks, from both sides
             return
         self._learned = (self._learned[-1], depths)
@@ -197,12 +284,18 @@ class DepthMap:
     def near_ends(self, lo: float, hi: float, reach_m: float) -> tuple[tuple[int, float], ...]:
         """This robot's own measured depths of the bins within ``reach_m`` of either end
         of [lo, hi], for its neighbours."""
-        key = (self.version, self.bin_of(lo - reach_m), self.bin_of(lo + reach_m),
-               self.bin_of(hi - reach_m), self.bin_of(hi + reach_m))
+        # once changing, none not sampled for a cycle: the algae may be another now
+        key: tuple[float, ...] = (
+            self.version, self.bin_of(lo - reach_m), self.bin_of(lo + reach_m),
+            self.bin_of(hi - reach_m), self.bin_of(hi + reach_m),
+            *((self.now,) if self.changing else ()))
         if self._ends[0] != key:
-            bins = set(range(key[1], key[2] + 1)) | set(range(key[3], key[4] + 1))
+            ends = [int(k) for k in key[1:5]]
+            bins = set(range(ends[0], ends[1] + 1)) | set(range(ends[2], ends[3] + 1))
+            fresh = self.now - self.horizon_s if self.changing else -math.inf
             self._ends = (key, tuple((b, self.depths[b]) for b in sorted(bins)
-                                     if self.kind.get(b, SUSPECT) > SUSPECT))
+                                     if self.kind.get(b, SUSPECT) > SUSPECT
+                                     and self.sampled_t.get(b, 0.0) >= fresh))
         return self._ends[1]
 
     def gap(self, lo: float, hi: float, tolerance_m: float = 0.02) -> bool:
@@ -274,7 +367,7 @@ class DepthMap:
         if self._integral[0] == self.version:
             return self._integral[1:]
         own = sorted((s, self._depth_now(s, d, top), kind)
-                     for placed in self.points.values() for s, d, kind, top in placed)
+                     for placed in self.points.values() for s, d, kind, top, _ in placed)
         by_bin: dict[int, list[tuple[float, float]]] = {}  # bin -> (place, smoothed depth)
         for (p, _, _), v in zip(own, _smoothed(own), strict=True):
             by_bin.setdefault(self.bin_of(p), []).append((p, v))
