@@ -31,20 +31,27 @@ SUSPECT, ROUGH, PRECISE = 0, 1, 2
 WEIGHT = {PRECISE: 25.0, ROUGH: 1.0, SUSPECT: 1.0}
 SMOOTH_M = 0.05  # a depth sample is averaged with the samples this close to it
 AGREE_M = 0.05  # that measured within this of it (across a step they differ more)
-# The algae may change while the team patrols (issue 18). A sample of a kind that can
-# tell (not SUSPECT) more than STALE_M from its bin's depth (twice a tick at full speed,
-# 5 cm, and the edge's error together) says the algae may have changed: from then on
-# the whole map keeps only the last KEEP_POINTS_CHANGING samples per bin, and a sample
-# is stale after the team's cycle (``tick``, the time a sweep each way takes): the
-# profile takes a bin without a sample that recent from its neighbours (as one never
-# sampled), a neighbour's depth not told for that long is dropped, and the bin's depth
-# takes its next sample of any kind. With the bin's next such sample off the same way
-# (one alone may be a leg that strayed across a step), the algae there did change: the
-# bin forgets at once its samples of before, of whatever kind, that disagree with the
-# new one. On a map that does not change none of this happens (the thesis's twelve
-# cases give the same summaries, field for field), and the map keeps KEEP_POINTS.
+# The algae may change while the team patrols (issue 18). A sample that contradicts
+# what earlier samples near it say (``_expected_at``: one at its place, or two either
+# side that agree) by more than STALE_M (twice a tick at full speed, 5 cm, and the
+# edge's error together; none on a bin's side) says the algae there may have changed;
+# a second one the same way within a cycle (one alone may be a leg that strayed across
+# a step) says it did. From then on the map is changing: every bin keeps only its last
+# KEEP_POINTS_CHANGING samples, a sample is stale after the team's cycle (``tick``, the
+# time a sweep each way takes) and the profile takes a bin without a sample that recent
+# from its neighbours (as one never sampled), a neighbour's depth not told for that
+# long is dropped, a bin's depth takes its next sample of any kind once its own are
+# that old, and a bin where a sample contradicts the earlier ones forgets at once its
+# samples of before, of whatever kind, that disagree with the new one. QUIET_CYCLES
+# cycles without a contradiction, the change is over: the map forgets the depths of
+# bins not sampled since and keeps and averages its samples as before. On a map that
+# does not change none of this happens (the thesis's twelve cases give the same
+# summaries, field for field), and the map keeps KEEP_POINTS.
 STALE_M = 0.1
+SAME_PLACE_M = 0.01  # samples this close measured the same column: a slope moves them little
+BRACKET_M = 0.03  # else samples this close either side, if they agree, say what it should be
 KEEP_POINTS_CHANGING = 3
+QUIET_CYCLES = 2.0  # no such sample for this many cycles: the change is over, keep more
 
 
 @dataclass
@@ -94,11 +101,12 @@ class DepthMap:
     _integral: tuple[int, list[float], list[float], list[float]] = (-1, [], [], [])
     _learned: tuple[object, object] = (None, None)  # the last two tuples learned
     _ends: tuple[object, tuple[tuple[int, float], ...]] = (None, ())  # near_ends's, by key
-    # bin -> a sample that disagreed with the bin's depth by more than STALE_M, waiting
-    # for the next to say whether the algae changed there
-    pending: dict[int, float] = field(default_factory=dict)
+    # the last sample that contradicted an earlier one at its place: (the sign of the
+    # change it saw, when), waiting for another to say the algae changed
+    contradicted: tuple[float, float] | None = None
     changing: bool = False  # the algae was seen to change: keep KEEP_POINTS_CHANGING
     now: float = 0.0  # the map's clock, s: the time its controller has run (``tick``)
+    changed_t: float = 0.0  # when a sample last said the algae changed
     horizon_s: float = math.inf  # once changing, samples older than this are stale
     sampled_t: dict[int, float] = field(default_factory=dict)  # bin -> its depth's latest
     shared_t: dict[int, float] = field(default_factory=dict)  # bin -> last told, once changing
@@ -119,7 +127,7 @@ class DepthMap:
         b = self.bin_of(s)
         offset = s - self.edge_lo - b * self.bin_m
         on_side = min(offset, self.bin_m - offset) < SIDE_M
-        changed = self._changed(b, depth, SUSPECT if on_side else kind)
+        changed = self._changed(b, s, depth, SUSPECT if on_side else kind)
         placed = self.points.setdefault(b, [])
         if changed:
             placed[:] = [p for p in placed if abs(p[1] - depth) <= STALE_M]
@@ -168,6 +176,15 @@ class DepthMap:
         self.horizon_s = horizon_s
         if not self.changing:
             return
+        if self.now - self.changed_t > QUIET_CYCLES * horizon_s:
+            # the change is over: the map averages as it did, and forgets the depths of
+            # bins not sampled since (a neighbour's, or its own from long ago)
+            self.changing = False
+            for b in [b for b in self.depths if self.sampled_t.get(b, 0.0) < self.changed_t]:
+                for table in (self.depths, self.samples, self.kind, self.last_seen):
+                    table.pop(b, None)  # type: ignore[attr-defined]
+            self.version += 1
+            return
         before = self.now - horizon_s
         stale = [b for b in self.shared if self.shared_t.get(b, -math.inf) < before]
         for b in stale:  # a neighbour's depth of a bin it no longer tells of
@@ -183,24 +200,48 @@ class DepthMap:
                 del self.points[b]
         self.version += 1
 
-    def _changed(self, b: int, depth: float, kind: int) -> bool:
-        """Whether this sample (of ``kind``, SUSPECT on a bin's side) confirms that the
-        algae at bin ``b`` changed: it and the bin's last sample that disagreed with the
-        bin's depth both differ from it by more than STALE_M, the same way."""
-        known = self.depths.get(b)
-        if kind == SUSPECT or known is None or self.kind.get(b, SUSPECT) == SUSPECT:
+    def _changed(self, b: int, s: float, depth: float, kind: int) -> bool:
+        """Whether this sample at ``s`` (of ``kind``, SUSPECT on a bin's side) says the
+        algae at bin ``b`` changed: it contradicts one of the bin's earlier samples taken
+        within SAME_PLACE_M of it (by more than STALE_M; neither on a bin's side), once
+        the map is changing or as another contradiction the same way did within a cycle
+        (the first of them alone may be a leg that strayed across a step)."""
+        if kind == SUSPECT:
             return False
-        gap = depth - known
-        if abs(gap) <= STALE_M:
-            self.pending.pop(b, None)
+        expected = self._expected_at(b, s)
+        if expected is None or abs(depth - expected) <= STALE_M:
             return False
-        self._begin_changing()  # one sample says the algae changed: stale samples age out
-        before = self.pending.get(b)
-        if before is None or (before - known) * gap <= 0.0:
-            self.pending[b] = depth
+        sign = math.copysign(1.0, depth - expected)
+        before, self.contradicted = self.contradicted, (sign, self.now)
+        if not self.changing and (before is None or before[0] != sign
+                                  or self.now - before[1] > self.horizon_s):
             return False
-        del self.pending[b]
+        self._begin_changing()
+        self.changed_t = self.now
         return True
+
+    def _expected_at(self, b: int, s: float) -> float | None:
+        """What the earlier samples near ``s`` (none on a bin's side) say its depth is:
+        the newest taken within SAME_PLACE_M of it; else the line between the nearest
+        ones within BRACKET_M either side, if they agree to STALE_M / 2 (no step or
+        steep slope between them); else None (nothing to tell a change by)."""
+        left: tuple[float, float] | None = None
+        right: tuple[float, float] | None = None
+        for k in (b - 1, b, b + 1):
+            for q, d, _, _, _ in reversed(self.points.get(k, ())):
+                offset = q - self.edge_lo - k * self.bin_m
+                if min(offset, self.bin_m - offset) < SIDE_M or abs(q - s) > BRACKET_M:
+                    continue
+                if k == b and abs(q - s) <= SAME_PLACE_M:
+                    return d
+                if q < s and (left is None or q > left[0]):
+                    left = (q, d)
+                elif q > s and (right is None or q < right[0]):
+                    right = (q, d)
+        if left is None or right is None or abs(left[1] - right[1]) > 0.5 * STALE_M:
+            return None
+        frac = (s - left[0]) / (right[0] - left[0])
+        return left[1] + frac * (right[1] - left[1])
 
     def known(self, b: int) -> bool:
         """Whether bin ``b``'s depth is measured (not only on its side) or shared."""
