@@ -69,7 +69,15 @@ def errors_figure(series: ErrorSeries, path: str | Path, run: RunData | None = N
     ax_phase.set_title("Phase error e_phi,i = wrap(phi_i+1 - phi_i)")
     ax_phase.set_ylabel("phase error (rad)")
     ax_phase.set_ylim(-np.pi * 1.05, np.pi * 1.05)
-    ax_work.set_title("Workload error e_Psi,i = Psi_i+1 - Psi_i")
+    if changes and len(series.pairs) and t.size:  # the changes' scale, not the start's
+        since = np.abs(series.workload[:, t >= float(changes[0]["t0"])])
+        top = float(np.nanmax(since)) if since.size and np.isfinite(since).any() else 0.0
+        if top > 0:
+            ax_work.set_ylim(-1.2 * top, 1.2 * top)
+            ax_work.set_title("Workload error e_Psi,i = Psi_i+1 - Psi_i (scaled to the "
+                              "errors from the first change on)")
+    if not changes:
+        ax_work.set_title("Workload error e_Psi,i = Psi_i+1 - Psi_i")
     ax_work.set_ylabel("workload error (m^2)")
     ax_work.set_xlabel("simulation time (s)")
     for ax in (ax_phase, ax_work):
