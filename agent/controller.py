@@ -266,6 +266,7 @@ class Controller:
         self.cycle_s, self.passes, chain = self._agree(dt, lower, upper, agree_lower,
                                                        agree_upper)
         rate = TWO_PI / self.cycle_s
+        self.depth_map.tick(dt, self.cycle_s)
         steer = self.patrol.step(x, y, theta, ice, algae, self.lo, self.hi,
                                  TeamInput(self.clock, self.passes, self.hurry))
         direction = self.patrol.view.direction

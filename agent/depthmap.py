@@ -31,6 +31,27 @@ SUSPECT, ROUGH, PRECISE = 0, 1, 2
 WEIGHT = {PRECISE: 25.0, ROUGH: 1.0, SUSPECT: 1.0}
 SMOOTH_M = 0.05  # a depth sample is averaged with the samples this close to it
 AGREE_M = 0.05  # that measured within this of it (across a step they differ more)
+# The algae may change while the team patrols (issue 18). A sample that contradicts
+# what earlier samples near it say (``_expected_at``: one at its place, or two either
+# side that agree) by more than STALE_M (twice a tick at full speed, 5 cm, and the
+# edge's error together; none on a bin's side) says the algae there may have changed;
+# a second one the same way within a cycle (one alone may be a leg that strayed across
+# a step) says it did. From then on the map is changing: every bin keeps only its last
+# KEEP_POINTS_CHANGING samples, a sample is stale after the team's cycle (``tick``, the
+# time a sweep each way takes) and the profile takes a bin without a sample that recent
+# from its neighbours (as one never sampled), a neighbour's depth not told for that
+# long is dropped, a bin's depth takes its next sample of any kind once its own are
+# that old, and a bin where a sample contradicts the earlier ones forgets at once its
+# samples of before, of whatever kind, that disagree with the new one. QUIET_CYCLES
+# cycles without a contradiction, the change is over: the map forgets the depths of
+# bins not sampled since and keeps and averages its samples as before. On a map that
+# does not change none of this happens (the thesis's twelve cases give the same
+# summaries, field for field), and the map keeps KEEP_POINTS.
+STALE_M = 0.1
+SAME_PLACE_M = 0.01  # samples this close measured the same column: a slope moves them little
+BRACKET_M = 0.03  # else samples this close either side, if they agree, say what it should be
+KEEP_POINTS_CHANGING = 3
+QUIET_CYCLES = 2.0  # no such sample for this many cycles: the change is over, keep more
 
 
 @dataclass
@@ -72,10 +93,11 @@ class DepthMap:
     # per bin, the in-legs' crossings of the ice edge: (x, y, weight), WEIGHT's
     crossings: dict[int, list[tuple[float, float, float]]] = field(default_factory=dict)
     _edges: dict[int, tuple[float, float, float] | None] = field(default_factory=dict)  # fits
-    # bin -> its last KEEP_POINTS samples as (s, depth, kind, top_y), the kind before
+    # bin -> its last KEEP_POINTS samples as (s, depth, kind, top_y, t), the kind before
     # a sample near the bin's side is marked SUSPECT (its place is known here); top_y
-    # where the algae ended (None: a depth not measured from the edge, the minimum)
-    points: dict[int, list[tuple[float, float, int, float | None]]] = field(
+    # where the algae ended (None: a depth not measured from the edge, the minimum); t
+    # the map's clock when it was taken
+    points: dict[int, list[tuple[float, float, int, float | None, float]]] = field(
         default_factory=dict)
     version: int = 0  # counts every sample recorded and shared depth changed, for caches
     # the profile ``average`` integrates, built for one version: (version, where each
@@ -83,6 +105,15 @@ class DepthMap:
     _integral: tuple[int, list[float], list[float], list[float]] = (-1, [], [], [])
     _learned: tuple[object, object] = (None, None)  # the last two tuples learned
     _ends: tuple[object, tuple[tuple[int, float], ...]] = (None, ())  # near_ends's, by key
+    # the last sample that contradicted an earlier one at its place: (the sign of the
+    # change it saw, when), waiting for another to say the algae changed
+    contradicted: tuple[float, float] | None = None
+    changing: bool = False  # the algae was seen to change: keep KEEP_POINTS_CHANGING
+    now: float = 0.0  # the map's clock, s: the time its controller has run (``tick``)
+    changed_t: float = 0.0  # when a sample last said the algae changed
+    horizon_s: float = math.inf  # once changing, samples older than this are stale
+    sampled_t: dict[int, float] = field(default_factory=dict)  # bin -> its depth's latest
+    shared_t: dict[int, float] = field(default_factory=dict)  # bin -> last told, once changing
 
     def bin_of(self, s: float) -> int:
         return int(math.floor((s - self.edge_lo) / self.bin_m))
@@ -98,14 +129,21 @@ class DepthMap:
         if ``depth`` was measured from the ice edge (the profile measures it again from
         the edge known then, never below ``default_m``, the patrol's minimum depth)."""
         b = self.bin_of(s)
-        placed = self.points.setdefault(b, [])
-        placed.append((s, depth, kind, top_y))
-        del placed[:-KEEP_POINTS]
-        self.version += 1
         offset = s - self.edge_lo - b * self.bin_m
-        if min(offset, self.bin_m - offset) < SIDE_M:
+        on_side = min(offset, self.bin_m - offset) < SIDE_M
+        changed = self._changed(b, s, depth, SUSPECT if on_side else kind)
+        placed = self.points.setdefault(b, [])
+        if changed:
+            placed[:] = [p for p in placed if abs(p[1] - depth) <= STALE_M]
+        placed.append((s, depth, kind, top_y, self.now))
+        del placed[:-(KEEP_POINTS_CHANGING if self.changing else KEEP_POINTS)]
+        self.version += 1
+        if on_side:
             kind = SUSPECT
         best = self.kind.get(b, -1)
+        if changed or (self.changing and self.now - self.sampled_t.get(b, self.now)
+                       > self.horizon_s):  # the samples of before, of any kind, are stale
+            best = -1
         if kind < best:
             return
         if kind > best:
@@ -118,9 +156,96 @@ class DepthMap:
         if len(ordered) >= 3:
             ordered = ordered[1:-1]
         self.depths[b] = sum(ordered) / len(ordered)
+        self.sampled_t[b] = self.now
         self.recorded += 1
         if kind > SUSPECT:
             self.last_seen[b] = self.recorded
+
+    def _begin_changing(self) -> None:
+        """The algae was seen to change: from now on every bin keeps only its last
+        KEEP_POINTS_CHANGING samples, and samples age out after ``horizon_s``."""
+        if not self.changing:
+            self.changing = True
+            for placed in self.points.values():
+                del placed[:-KEEP_POINTS_CHANGING]
+            self.shared_t = dict.fromkeys(self.shared, self.now)
+            self.version += 1
+
+    def tick(self, dt: float, horizon_s: float) -> None:
+        """The controller's tick of ``dt``: the map's clock runs on, and once the algae
+        was seen to change, samples older than ``horizon_s`` (the team's cycle) leave
+        the profile, unless none newer is left anywhere (a robot that sampled nothing
+        for a cycle)."""
+        self.now += dt
+        self.horizon_s = horizon_s
+        if not self.changing:
+            return
+        if self.now - self.changed_t > QUIET_CYCLES * horizon_s:
+            # the change is over: the map averages as it did, and forgets the depths of
+            # bins not sampled since (a neighbour's, or its own from long ago)
+            self.changing = False
+            for b in [b for b in self.depths if self.sampled_t.get(b, 0.0) < self.changed_t]:
+                for table in (self.depths, self.samples, self.kind, self.last_seen):
+                    table.pop(b, None)  # type: ignore[attr-defined]
+            self.version += 1
+            return
+        before = self.now - horizon_s
+        stale = [b for b in self.shared if self.shared_t.get(b, -math.inf) < before]
+        for b in stale:  # a neighbour's depth of a bin it no longer tells of
+            del self.shared[b]
+            self.version += 1
+        if not any(p[4] < before for placed in self.points.values() for p in placed):
+            return
+        if not any(p[4] >= before for placed in self.points.values() for p in placed):
+            return
+        for b in list(self.points):
+            self.points[b] = [p for p in self.points[b] if p[4] >= before]
+            if not self.points[b]:
+                del self.points[b]
+        self.version += 1
+
+    def _changed(self, b: int, s: float, depth: float, kind: int) -> bool:
+        """Whether this sample at ``s`` (of ``kind``, SUSPECT on a bin's side) says the
+        algae at bin ``b`` changed: it contradicts one of the bin's earlier samples taken
+        within SAME_PLACE_M of it (by more than STALE_M; neither on a bin's side), once
+        the map is changing or as another contradiction the same way did within a cycle
+        (the first of them alone may be a leg that strayed across a step)."""
+        if kind == SUSPECT:
+            return False
+        expected = self._expected_at(b, s)
+        if expected is None or abs(depth - expected) <= STALE_M:
+            return False
+        sign = math.copysign(1.0, depth - expected)
+        before, self.contradicted = self.contradicted, (sign, self.now)
+        if not self.changing and (before is None or before[0] != sign
+                                  or self.now - before[1] > self.horizon_s):
+            return False
+        self._begin_changing()
+        self.changed_t = self.now
+        return True
+
+    def _expected_at(self, b: int, s: float) -> float | None:
+        """What the earlier samples near ``s`` (none on a bin's side) say its depth is:
+        the newest taken within SAME_PLACE_M of it; else the line between the nearest
+        ones within BRACKET_M either side, if they agree to STALE_M / 2 (no step or
+        steep slope between them); else None (nothing to tell a change by)."""
+        left: tuple[float, float] | None = None
+        right: tuple[float, float] | None = None
+        for k in (b - 1, b, b + 1):
+            for q, d, _, _, _ in reversed(self.points.get(k, ())):
+                offset = q - self.edge_lo - k * self.bin_m
+                if min(offset, self.bin_m - offset) < SIDE_M or abs(q - s) > BRACKET_M:
+                    continue
+                if k == b and abs(q - s) <= SAME_PLACE_M:
+                    return d
+                if q < s and (left is None or q > left[0]):
+                    left = (q, d)
+                elif q > s and (right is None or q < right[0]):
+                    right = (q, d)
+        if left is None or right is None or abs(left[1] - right[1]) > 0.5 * STALE_M:
+            return None
+        frac = (s - left[0]) / (right[0] - left[0])
+        return left[1] + frac * (right[1] - left[1])
 
     def known(self, b: int) -> bool:
         """Whether bin ``b``'s depth is measured (not only on its side) or shared."""
@@ -190,6 +315,9 @@ class DepthMap:
 
     def learn(self, depths: tuple[tuple[int, float], ...]) -> None:
         """A neighbour's published depths of the bins near its ends."""
+        if self.changing:  # what a neighbour still tells is not stale
+            for b, _ in depths:
+                self.shared_t[b] = self.now
         if depths in self._learned:  # as last tick's: most ticks, from both sides
             return
         self._learned = (self._learned[-1], depths)
@@ -201,14 +329,20 @@ class DepthMap:
     def near_ends(self, lo: float, hi: float, reach_m: float) -> tuple[tuple[int, float], ...]:
         """This robot's own measured depths of the bins within ``reach_m`` of either end
         of [lo, hi] and on the edge, for its neighbours."""
-        key = (self.version, self.bin_of(lo - reach_m), self.bin_of(lo + reach_m),
-               self.bin_of(hi - reach_m), self.bin_of(hi + reach_m))
+        # once changing, none not sampled for a cycle: the algae may be another now
+        key: tuple[float, ...] = (
+            self.version, self.bin_of(lo - reach_m), self.bin_of(lo + reach_m),
+            self.bin_of(hi - reach_m), self.bin_of(hi + reach_m),
+            *((self.now,) if self.changing else ()))
         if self._ends[0] != key:
-            bins = set(range(key[1], key[2] + 1)) | set(range(key[3], key[4] + 1))
+            ends = [int(k) for k in key[1:5]]
+            bins = set(range(ends[0], ends[1] + 1)) | set(range(ends[2], ends[3] + 1))
             if self.bins is not None:
                 bins = {b for b in bins if 0 <= b < self.bins}
+            fresh = self.now - self.horizon_s if self.changing else -math.inf
             self._ends = (key, tuple((b, self.depths[b]) for b in sorted(bins)
-                                     if self.kind.get(b, SUSPECT) > SUSPECT))
+                                     if self.kind.get(b, SUSPECT) > SUSPECT
+                                     and self.sampled_t.get(b, 0.0) >= fresh))
         return self._ends[1]
 
     def gap(self, lo: float, hi: float, tolerance_m: float = 0.02) -> bool:
@@ -280,7 +414,7 @@ class DepthMap:
         if self._integral[0] == self.version:
             return self._integral[1:]
         own = sorted((s, self._depth_now(s, d, top), kind)
-                     for placed in self.points.values() for s, d, kind, top in placed)
+                     for placed in self.points.values() for s, d, kind, top, _ in placed)
         by_bin: dict[int, list[tuple[float, float]]] = {}  # bin -> (place, smoothed depth)
         for (p, _, _), v in zip(own, _smoothed(own), strict=True):
             by_bin.setdefault(self.bin_of(p), []).append((p, v))

@@ -24,7 +24,8 @@ from agent.controller import Controller, Gains, Neighbour, RobotLimits, initial_
 from agent.patrol import PatrolConfig
 from agent.ring import frame_shift, initial_arc
 from agent.ringcontrol import RingController
-from report.measures import EdgeModel, team_measures
+from report.measures import EdgeModel, TeamErrors, change_recovery, team_errors, team_measures
+from simworld.change import changing_map, frames
 from simworld.maps import GridMap, load_map
 from simworld.world import ODOM_NOISE, ROBOT_RADIUS_M, Reading, World
 from wire import Scan
@@ -48,6 +49,7 @@ class EngineCase:
     scale: float = 0.05  # metres per pixel of a PNG map
     config: str | None = None  # an agent configuration file (TOML), under the overrides
     scanners: int = 0  # with pf: scanners in the row, 0 for one per 10 m of edge
+    change: tuple[str, ...] = ()  # --change specs: the map changes during the run
 
 
 @dataclass
@@ -69,6 +71,12 @@ class Tracks:
     # (the whole turn nearest its arc's middle) and d into the ice; None on an open edge
     s: np.ndarray | None = None
     d: np.ndarray | None = None
+    # A map that changes: the frames of the true patrol depth the world would tell the
+    # recorder (simworld.change.frames: their times, a depth per map cell each) and the
+    # changes' windows, flat [t0, t1, ...]; empty for a static map
+    frame_t: list[float] = field(default_factory=list)
+    frames: list[list[float]] = field(default_factory=list)
+    change_windows: list[float] = field(default_factory=list)
 
 
 def run(case: EngineCase, gmap: GridMap | None = None) -> tuple[GridMap, Tracks]:
@@ -78,11 +86,15 @@ def run(case: EngineCase, gmap: GridMap | None = None) -> tuple[GridMap, Tracks]
                          f"{case.localization!r}")
     gains, patrol, limits = agent_config.load(case.config, case.overrides)
     gmap = gmap or load_map(case.map, case.scale, seed=case.seed)
+    if gmap.closed and case.change:
+        raise ValueError("--change: a closed edge (a ring round a floe) does not change yet;"
+                         " only an open edge's algae does")
     if gmap.closed:
         return gmap, _run_ring(case, gmap, gains, patrol, limits)
+    change = changing_map(gmap, case.change, case.scale, case.seed)
     n = case.robots
     world = World(gmap, n, case.start, seed=case.seed, odom_noise=case.odom_noise,
-                  odom_turn_noise=case.odom_turn_noise)
+                  odom_turn_noise=case.odom_turn_noise, change=change)
     odometry = case.localization == "odometry"
     lo_e, hi_e = gmap.edge_lo, gmap.edge_hi
     localizer = _Localization(gmap, n, case) if case.localization == "pf" else None
@@ -123,8 +135,11 @@ def run(case: EngineCase, gmap: GridMap | None = None) -> tuple[GridMap, Tracks]
         published = list(now)
         world.step(cmds, DT_S)
     t = np.arange(ticks) * DT_S
-    return gmap, Tracks(t, x, y, lo, hi, direction, seen_phase, seen_work, cycle,
-                        pose_error)
+    tracks = Tracks(t, x, y, lo, hi, direction, seen_phase, seen_work, cycle, pose_error)
+    if change is not None:
+        tracks.frame_t, tracks.frames = frames(change, ticks, DT_S, gmap.cell_m)
+        tracks.change_windows = change.windows
+    return gmap, tracks
 
 
 def _run_ring(case: EngineCase, gmap: GridMap, gains: Gains, patrol: PatrolConfig,
@@ -219,9 +234,25 @@ def measures(gmap: GridMap, tracks: Tracks) -> dict[str, float]:
         tr = tracks
         return ring_measures(tr.t, tracks.s, tracks.d, tr.lo, tr.hi, tr.direction,
                              tr.phase, tr.workload, ring)
-    cell = gmap.cell_m  # the report's bins: the map's cells, as WorldInfo's
-    edge = EdgeModel(gmap.edge_lo, gmap.edge_hi, cell, gmap.patrol_depth_bins(cell),
-                     gmap.edge_y_bins(cell), ROBOT_RADIUS_M)
     tr = tracks
     return team_measures(tr.t, tr.x, tr.y, tr.lo, tr.hi, tr.direction, tr.phase,
+                         tr.workload, edge_model(gmap, tracks))
+
+
+def edge_model(gmap: GridMap, tracks: Tracks) -> EdgeModel:
+    """The open edge as the report sees it from the world's WorldInfo: the map's cells
+    as bins, and on a map that changes the frames of its true depth."""
+    cell = gmap.cell_m  # the report's bins: the map's cells, as WorldInfo's
+    return EdgeModel(gmap.edge_lo, gmap.edge_hi, cell, gmap.patrol_depth_bins(cell),
+                     gmap.edge_y_bins(cell), ROBOT_RADIUS_M, frame_t=tracks.frame_t,
+                     frames=tracks.frames, change_windows=tracks.change_windows)
+
+
+def change_measures(gmap: GridMap, tracks: Tracks) -> tuple[TeamErrors, list[dict[str, float]]]:
+    """An open edge's error series and, for each change of its map, how the team
+    rebalanced (``report.measures.change_recovery``), as ``btrack report`` finds them."""
+    tr = tracks
+    edge = edge_model(gmap, tracks)
+    errors = team_errors(tr.t, tr.x, tr.y, tr.lo, tr.hi, tr.direction, tr.phase,
                          tr.workload, edge)
+    return errors, change_recovery(errors, edge, tr.cycle_s)

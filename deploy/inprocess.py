@@ -63,7 +63,8 @@ def run(args: argparse.Namespace, out: Path, localization: str | None) -> int:
     }
     case = EngineCase(map=args.map, robots=args.robots, start=args.start,
                       duration_s=args.duration, seed=args.seed, overrides=overrides,
-                      localization=localization, scale=args.scale, config=args.config)
+                      localization=localization, scale=args.scale, config=args.config,
+                      change=tuple(args.change))
     wall = time.monotonic()
     try:
         gmap, tracks = run_case(case, gmap)
@@ -88,12 +89,26 @@ def run(args: argparse.Namespace, out: Path, localization: str | None) -> int:
                              tracks.direction, tracks.phase, tracks.workload, edge)
         files += ring_figures(gmap, tracks.t, tracks.x, tracks.y, errors, tracks.lo,
                               float(result["workload_mean_m2"]), out)
+    changes: list[dict[str, float | None]] = []
+    spec = ""
+    if tracks.frames:  # the map changed: the errors with the changes marked, as a report's
+        from deploy.engine import change_measures
+        from report.figures import errors_figure
+        from simworld.change import parse_changes, spec_text
+
+        spec = spec_text(parse_changes(args.change))
+        errors, rows = change_measures(gmap, tracks)
+        changes = [{k: (None if not math.isfinite(v) else v) for k, v in c.items()}
+                   for c in rows]
+        errors_figure(errors, out / "errors.png", changes=changes)
+        files.append("errors.png")
     summary = {
         "engine": "inprocess", "map": gmap.name, "closed": gmap.closed,
         "robots": args.robots, "start": args.start, "duration_s": args.duration,
         "seed": args.seed, "localization": localization, "wall_s": round(wall, 1),
         "measures": {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
                      for k, v in result.items()},
+        **({"change": spec, "changes": changes} if changes else {}),
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
     shape = "ring on a closed edge" if gmap.closed else "chain on an open edge"
@@ -103,6 +118,10 @@ def run(args: argparse.Namespace, out: Path, localization: str | None) -> int:
              "| measure | value |", "| --- | --- |"]
     lines += [f"| {label} | {result.get(key, math.nan):.4g} |" for key, label in REPORTED
               if key in result]
+    if changes:
+        from report.cli import changes_markdown
+
+        lines += changes_markdown(spec, changes).splitlines()
     (out / "report.md").write_text("\n".join(lines) + "\n")
     if not args.quiet:
         print("\n".join(lines[4:]))

@@ -40,6 +40,7 @@ from deploy.procs import (
     stop_on_sigterm,
     wait_listening,
 )
+from simworld.change import CHANGE_HELP, ChangeError, changing_map
 from simworld.maps import MapError, load_map
 from wire import DecodeError, Keys, Progress, Tick, decode, encode
 from wire import Fault as WireFault
@@ -103,6 +104,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--out", type=Path, help="output directory (default runs/<time>)")
     p.add_argument("--realtime", action="store_true", help="pace the world on the wall clock")
+    p.add_argument("--change", action="append", default=[], metavar="SPEC", help=CHANGE_HELP)
     p.add_argument("--kidnap", action="append", default=[], metavar="ROBOT@T:DX,DY",
                    help="the world carries robot ROBOT by (DX, DY) m at time T (repeatable)")
     p.add_argument("--config", metavar="FILE.toml", help="agent configuration for every agent")
@@ -302,7 +304,7 @@ HIL_REFUSED = (("fault", "--fault"), ("chaos", "--chaos"), ("kidnap", "--kidnap"
                ("odom_noise", "--odom-noise"), ("odom_turn_noise", "--odom-turn-noise"),
                ("scanners", "--scanners"), ("sensors", "--sensors"),
                ("live", "--live"), ("clouds_every", "--clouds-every"),
-               ("engine", "--engine"))
+               ("engine", "--engine"), ("change", "--change"))
 
 
 def hil_refusal(args: argparse.Namespace) -> str | None:
@@ -360,6 +362,16 @@ def refusal(args: argparse.Namespace, bodies: int) -> str | None:
         gmap = load_map(args.map, args.scale, args.seed)
     except MapError as exc:
         return f"--map: {exc}"
+    try:
+        change = changing_map(gmap, args.change, args.scale, args.seed)
+    except ChangeError as exc:
+        return str(exc)
+    if change is not None and args.sensors == "lab":
+        return "--change: the lab sensors read a static map only, so far; use --sensors ideal"
+    if change is not None and any(c.t0 >= args.duration for c in change.changes):
+        late = next(c for c in change.changes if c.t0 >= args.duration)
+        return (f"--change {late} would begin after the run's end (--duration "
+                f"{args.duration:g} s)")
     if gmap.closed and args.engine != "inprocess":
         return (f"{args.map} is a closed edge (an island): a ring runs in-process only, so "
                 "far: add --engine inprocess (truth poses); over the bus, a ring's agents, "
@@ -505,6 +517,8 @@ def run(args: argparse.Namespace) -> int:
                     world_args += ["--hold-at", str(f.at_s)]
             for spec in args.kidnap:
                 world_args += ["--kidnap", spec]
+            for spec in args.change:
+                world_args += ["--change", spec]
             world_args += forward_flags(args, ODOM_FLAGS)
             if args.scanners is not None:
                 world_args += ["--scanners", str(args.scanners)]

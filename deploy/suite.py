@@ -23,6 +23,7 @@ from typing import Any
 
 from deploy.procs import ODOM_FLAGS, forward_flags, interrupted_code, non_negative, stop_on_sigterm
 from report.thesis import MAPS, STARTS, all_cases
+from simworld.change import CHANGE_HELP, ChangeError, parse_changes
 
 DEFAULT_DURATION_S = 1200.0
 
@@ -78,6 +79,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="bus: each case a full btrack sim team of processes; inprocess: each "
                    "in one process, the same cores bit for bit, in seconds (truth or "
                    "odometry poses) [bus]")
+    p.add_argument("--change", action="append", default=[], metavar="SPEC",
+                   help="every case's map changes during the run, as btrack sim --change "
+                   "(repeatable): " + CHANGE_HELP)
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     return p
 
@@ -97,6 +101,8 @@ def _sim_args(args: argparse.Namespace, case: Case) -> list[str]:
         out += ["--config", args.config]
     if args.sensors:
         out += ["--sensors", args.sensors]
+    for spec in args.change:
+        out += ["--change", spec]
     return out + forward_flags(args, ODOM_FLAGS)
 
 
@@ -201,9 +207,14 @@ def run_inprocess(args: argparse.Namespace, case: Case) -> dict[str, Any]:
     gmap, tr = run(EngineCase(
         map=case.map, robots=3, start=case.start, duration_s=args.duration, seed=args.seed,
         localization=args.localization or "truth", config=args.config,
+        change=tuple(args.change),
         **{f: getattr(args, f) for f in ODOM_FLAGS if getattr(args, f) is not None}))
     summary: dict[str, Any] = {"map": case.map, "start": case.start}
     summary.update(measures(gmap, tr))
+    if tr.frames:  # the map changed: how the team rebalanced after each change
+        from deploy.engine import change_measures
+
+        summary["changes"] = change_measures(gmap, tr)[1]
     summary["thesis_phase_sse_rad"] = thesis_cell(PHASE_SSE_RAD, case.map, case.start)
     summary["thesis_workload_sse_m2"] = thesis_cell(WORKLOAD_SSE_M2, case.map, case.start)
     wall = time.monotonic() - began
@@ -244,6 +255,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.jobs < 1 or not args.duration > 0:
         print("btrack suite: --jobs must be at least 1 and --duration positive",
               file=sys.stderr)
+        return 2
+    try:
+        parse_changes(args.change)
+    except ChangeError as exc:
+        print(f"btrack suite: {exc}", file=sys.stderr)
         return 2
     out: Path = args.out or Path("runs") / time.strftime("suite-%Y%m%d-%H%M%S")
     out.mkdir(parents=True, exist_ok=True)

@@ -87,6 +87,7 @@ class Recording:
         self.rejected = 0  # well formed but implausible: recorded under rejected/
         self.ticks = 0  # Ticks recorded
         self.info: WorldInfo | None = None  # the run's first WorldInfo
+        self._depth_info: WorldInfo | None = None  # the last taken (a changing map's frame)
         self._state_bounds: plausible.Bounds | None = None  # what states are judged by
         self.last_tick: Tick | None = None
         # the world's ticks in order; each with what recording it needs
@@ -173,15 +174,7 @@ class Recording:
         world's clock and the agents' states), None if it can be: the recording and the
         report must not take a forged final tick or a state from the future as true."""
         if isinstance(msg, WorldInfo):
-            if self.info is None:
-                self.info = msg
-                deepest = max(msg.patrol_depth, default=0.0) + DEPTH_SLACK_M
-                self._state_bounds = plausible.Bounds(msg.edge_lo, msg.edge_hi, deepest,
-                                                      msg.bin_m, plausible.NO_PASS_LIMIT)
-            elif (msg.edge_lo, msg.edge_hi, msg.dt) != (
-                    self.info.edge_lo, self.info.edge_hi, self.info.dt):
-                return "a second world with another edge or tick"
-            return None
+            return self._info_problem(msg)
         info = self.info
         if isinstance(msg, Tick):
             if info is not None:  # its order is judged in _handle_tick
@@ -201,6 +194,47 @@ class Recording:
             return plausible.state_problem(msg, self._state_bounds, newest,
                                            RECORDER_WINDOW_TICKS, RECORDER_WINDOW_TICKS)
         return None
+
+    def _info_problem(self, msg: WorldInfo) -> str | None:
+        """Why a WorldInfo cannot be the run's world, None if it can (and is taken). A
+        second one must have the first's edge and tick; its depth profile may differ
+        only on a map that changes (the first declared its changes, this one the same),
+        from a later time than the last one's, in a change's window, not ahead of the
+        clock."""
+        first = self.info
+        if first is None:
+            self.info = self._depth_info = msg
+            self._widen_bounds(msg)
+            return None
+        if (msg.edge_lo, msg.edge_hi, msg.dt) != (first.edge_lo, first.edge_hi, first.dt):
+            return "a second world with another edge or tick"
+        if (msg.change, msg.change_windows) != (first.change, first.change_windows):
+            return "a second world with other changes of the map"
+        last = self._depth_info or first
+        if msg.patrol_depth == last.patrol_depth and msg.edge_y == last.edge_y:
+            return None
+        if not first.change_windows:
+            return "a second world with another depth profile; this run's map does not change"
+        if len(msg.patrol_depth) != len(first.patrol_depth) or msg.edge_y != first.edge_y:
+            return "a changed map with other bins or another edge shape"
+        if msg.depth_t < last.depth_t:
+            return f"a depth profile from t = {msg.depth_t:g} s, before the last one's"
+        w = first.change_windows
+        if not any(w[i] - 1e-9 <= msg.depth_t <= w[i + 1] + 1e-9 for i in range(0, len(w), 2)):
+            return f"a depth profile from t = {msg.depth_t:g} s, in no window of the changes"
+        now = self.last_tick.t if self.last_tick is not None else 0.0
+        if msg.depth_t > now + RECORDER_WINDOW_TICKS * first.dt:
+            return f"a depth profile from t = {msg.depth_t:g} s, ahead of the clock ({now:g} s)"
+        self._depth_info = msg
+        self._widen_bounds(msg)
+        return None
+
+    def _widen_bounds(self, msg: WorldInfo) -> None:
+        """The agents' states are judged against the deepest true depth so far."""
+        deepest = max(msg.patrol_depth, default=0.0) + DEPTH_SLACK_M
+        if self._state_bounds is None or deepest > self._state_bounds.depth_max:
+            self._state_bounds = plausible.Bounds(msg.edge_lo, msg.edge_hi, deepest,
+                                                  msg.bin_m, plausible.NO_PASS_LIMIT)
 
     def _note_tick(self, tick: Tick) -> None:
         self.last_tick = tick

@@ -195,6 +195,39 @@ def faults_markdown(faults: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def changes_markdown(spec: str, changes: list[dict[str, Any]]) -> str:
+    """The table of the map's changes and the team's rebalancing after each, or nothing
+    for a static map."""
+    if not changes:
+        return ""
+    lines = [
+        "",
+        "## The map changed",
+        "",
+        f"`--change {spec}`" if spec else "",
+        "",
+        "| change (s) | cycle then (s) | band (m^2) | back in band after (s / cycles) | "
+        "stays in band after (s / cycles) | peak error / mean workload | mean error / mean "
+        "workload during |",
+        "| --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for c in changes:
+        lines.append(
+            f"| {_fmt(c['t0'])} to {_fmt(c['t1'])} | {_fmt(c['cycle_s'])} | "
+            f"{_fmt(c['band_m2'])} | {_fmt(c['back_s'])} / {_fmt(c['back_cycles'])} | "
+            f"{_fmt(c['settled_s'])} / {_fmt(c['settled_cycles'])} | {_fmt(c['peak_rel'])} | "
+            f"{_fmt(c['during_rel'])} |")
+    lines += [
+        "",
+        f"From each change's end: the worst workload error over neighbour pairs (true "
+        f"depth in force at each tick, {CONVERGE_SMOOTH_S:g} s average) against a band of "
+        f"{100 * WORKLOAD_REL_BAND:g} % of the mean workload per robot then; cycles of the "
+        "team's cycle at the change's end. Shaded on errors.png.",
+        "",
+    ]
+    return "\n".join(lines)
+
+
 def make_report(
     run_dir: str | Path,
     phase_band: float = PHASE_BAND_RAD,
@@ -217,7 +250,7 @@ def make_report(
     loc = localization_errors(run)
     summary = compute_summary(table, phase_band, workload_band, rev, loc)
     write_summary(run_dir / "summary.json", summary)
-    errors_figure(table.errors, run_dir / "errors.png", run)
+    errors_figure(table.errors, run_dir / "errors.png", run, summary.get("changes"))
     map_figure(run, run_dir / "map.png")
     boundaries_figure(table, run_dir / "boundaries.png")
     revisit_figure(rev, run_dir / "revisit.png")
@@ -232,6 +265,7 @@ def make_report(
                     f"{_fmt(json_safe(mean))} / {_fmt(json_safe(p95))}")
     markdown = report_markdown(summary, phase_band, workload_band, extra)
     markdown += faults_markdown(summary.get("faults") or [])
+    markdown += changes_markdown(summary.get("change") or "", summary.get("changes") or [])
     (run_dir / "report.md").write_text(markdown)
     return summary
 

@@ -5,7 +5,9 @@ of water, ice, algae and the robots' tracks, as figs. 6.10 and 7.2) and revisit.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -30,8 +32,11 @@ def _thin(n: int) -> slice:
     return slice(None, None, max(1, n // MAX_POINTS))
 
 
-def errors_figure(series: ErrorSeries, path: str | Path, run: RunData | None = None) -> None:
-    """Phase error and workload error per neighbour pair against time, two panels."""
+def errors_figure(series: ErrorSeries, path: str | Path, run: RunData | None = None,
+                  changes: list[dict[str, Any]] | None = None) -> None:
+    """Phase error and workload error per neighbour pair against time, two panels; the
+    map's ``changes`` (``measures.change_recovery``'s rows) shaded, each with the time
+    the workload error was back in its band after it."""
     fig, (ax_phase, ax_work) = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
     t = series.t
     step = _thin(t.size)
@@ -64,12 +69,21 @@ def errors_figure(series: ErrorSeries, path: str | Path, run: RunData | None = N
     ax_phase.set_title("Phase error e_phi,i = wrap(phi_i+1 - phi_i)")
     ax_phase.set_ylabel("phase error (rad)")
     ax_phase.set_ylim(-np.pi * 1.05, np.pi * 1.05)
-    ax_work.set_title("Workload error e_Psi,i = Psi_i+1 - Psi_i")
+    if changes and len(series.pairs) and t.size:  # the changes' scale, not the start's
+        since = np.abs(series.workload[:, t >= float(changes[0]["t0"])])
+        top = float(np.nanmax(since)) if since.size and np.isfinite(since).any() else 0.0
+        if top > 0:
+            ax_work.set_ylim(-1.2 * top, 1.2 * top)
+            ax_work.set_title("Workload error e_Psi,i = Psi_i+1 - Psi_i (scaled to the "
+                              "errors from the first change on)")
+    if not changes:
+        ax_work.set_title("Workload error e_Psi,i = Psi_i+1 - Psi_i")
     ax_work.set_ylabel("workload error (m^2)")
     ax_work.set_xlabel("simulation time (s)")
     for ax in (ax_phase, ax_work):
         if run is not None:
             _mark_faults(ax, run)
+        _mark_changes(ax, changes or [], ax is ax_work, float(t[-1]) if t.size else 0.0)
         ax.axhline(0.0, color="grey", lw=0.6)
         ax.grid(True, alpha=0.3)
         if series.pairs:
@@ -156,6 +170,29 @@ def map_figure(run: RunData, path: str | Path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def _mark_changes(ax: plt.Axes, changes: list[dict[str, Any]], band: bool, t_end: float
+                  ) -> None:
+    """Each change of the map shaded over its window; on the workload panel (``band``)
+    the band after it and a dashed line where the error was back in it."""
+    for c in changes:
+        t0, t1 = float(c["t0"]), float(c["t1"])
+        ax.axvspan(t0, t1, color="tab:green", alpha=0.12, lw=0)
+        ax.annotate("map changes", (0.5 * (t0 + t1), 1.0), xycoords=("data", "axes fraction"),
+                    va="top", ha="center", fontsize=7, color="darkgreen")
+        back = c.get("back_s")
+        if band and isinstance(back, (int, float)) and math.isfinite(back):
+            ax.axvline(t1 + back, color="darkgreen", lw=0.9, ls="--")
+            cycles = c.get("back_cycles")
+            text = (f"back in band {back:.0f} s" + (f" ({cycles:.1f} cycles)" if isinstance(
+                cycles, (int, float)) and math.isfinite(cycles) else ""))
+            ax.annotate(text, (t1 + back, 0.02), xycoords=("data", "axes fraction"),
+                        rotation=90, va="bottom", ha="left", fontsize=7, color="darkgreen")
+        width = c.get("band_m2")
+        if band and isinstance(width, (int, float)) and math.isfinite(width):
+            ax.fill_between([t1, max(t1, t_end)], -width, width, color="darkgreen",
+                            alpha=0.08, lw=0)
 
 
 def _mark_faults(ax: plt.Axes, run: RunData) -> None:

@@ -23,7 +23,7 @@ from wire.messages import AgentState, Fault, Pose, Sense, Tick, WorldInfo
 from wire.messages import Truth as WireTruth
 
 STATE_FIELDS = ("t", "lo", "hi", "phase", "phase_des", "workload", "depth_avg", "direction",
-                "lower", "upper")
+                "lower", "upper", "cycle_s")
 TRUTH_FIELDS = ("t", "x", "y", "theta")
 ODOM_FIELDS = ("t", "odom_dist_m", "odom_dtheta")
 
@@ -60,6 +60,7 @@ class States:
     direction: np.ndarray
     lower: np.ndarray  # the neighbour ids it named, -1 for none
     upper: np.ndarray
+    cycle_s: np.ndarray  # the team's cycle it followed
 
 
 @dataclass
@@ -85,6 +86,9 @@ class RunData:
     # what each part counted as dropped (malformed) and rejected (implausible): the
     # recorder by topic, each agent (its last state's counts) and the world (its last tick's)
     refused: dict[str, Any] = field(default_factory=dict)
+    # a map that changes (WorldInfo.change_windows): the true patrol depth of every
+    # WorldInfo, (depth_t, patrol_depth) by time, one per depth_t; empty for a static map
+    depth_frames: list[tuple[float, list[float]]] = field(default_factory=list)
 
     @property
     def robot_ids(self) -> list[int]:
@@ -201,6 +205,7 @@ def load_run(path: str | Path) -> RunData:
     agent_counts: dict[int, tuple[int, int]] = {}
     world_counts = (0, 0)
     agents_edge: tuple[float, float] | None = None
+    frames: dict[float, list[float]] = {}  # depth_t -> the true patrol depth from then
     cut: list[str] = []  # why the file ends early, if it does
     read = 0
     try:
@@ -250,7 +255,7 @@ def load_run(path: str | Path) -> RunData:
                 elif isinstance(msg, AgentState):
                     states[msg.robot].append((msg.t, msg.lo, msg.hi, msg.phase, msg.phase_des,
                                               msg.workload, msg.depth_avg, msg.direction,
-                                              msg.lower, msg.upper))
+                                              msg.lower, msg.upper, msg.cycle_s))
                     agent_counts[msg.robot] = (msg.dropped, msg.rejected)
                     agents_edge = (msg.edge_lo, msg.edge_hi)
                 elif isinstance(msg, Pose):
@@ -261,6 +266,7 @@ def load_run(path: str | Path) -> RunData:
                         poses[msg.robot].append((msg.t, *msg.pose))
                 elif isinstance(msg, WorldInfo):
                     info = dataclasses.asdict(msg)
+                    frames[msg.depth_t] = msg.patrol_depth
     except LoadError:
         raise
     except Exception as exc:  # the mcap reader raises many types on a damaged file
@@ -290,6 +296,7 @@ def load_run(path: str | Path) -> RunData:
         agents_edge=agents_edge,
         cut_short=cut[0] if cut else "",
         rejected=rejected,
+        depth_frames=sorted(frames.items()) if info.get("change_windows") else [],
         refused={"recorder_rejected": dict(sorted(rejected.items())),
                  "agents_dropped": {str(r): c[0] for r, c in sorted(agent_counts.items())},
                  "agents_rejected": {str(r): c[1] for r, c in sorted(agent_counts.items())},

@@ -49,6 +49,13 @@ class EdgeModel:
     patrol_depth: Sequence[float]
     edge_y: Sequence[float] = ()  # () = straight at y 0
     robot_radius: float = 0.17
+    # A map that changes (WorldInfo's frames): the times from which each of ``frames``
+    # (a patrol depth per bin, as ``patrol_depth``) is the true one, the true depth the
+    # line between consecutive frames; and the changes' windows, flat [t0, t1, ...].
+    # No frames: ``patrol_depth`` all the run.
+    frame_t: Sequence[float] = ()
+    frames: Sequence[Sequence[float]] = ()
+    change_windows: Sequence[float] = ()
 
     @property
     def length(self) -> float:
@@ -69,17 +76,63 @@ class EdgeModel:
         ys = np.asarray(self.edge_y, dtype=float)
         return np.interp(x, self.bin_centres(ys.size), ys)
 
-    def workload(self, lo: np.ndarray | float, hi: np.ndarray | float) -> np.ndarray:
+    @property
+    def changes(self) -> list[tuple[float, float]]:
+        """The map's changes, (t0, t1) each; none for a static map."""
+        w = list(self.change_windows)
+        return list(zip(w[0::2], w[1::2], strict=True))
+
+    def workload(self, lo: np.ndarray | float, hi: np.ndarray | float,
+                 t: np.ndarray | None = None) -> np.ndarray:
         """True workload of segments [lo, hi] (``true_workload``); NaN without a depth
-        profile (a recording with no world)."""
+        profile (a recording with no world). On a map that changes, the depth in force
+        at the times ``t`` (the last axis of lo and hi)."""
         if len(self.patrol_depth) == 0:
             return np.full(np.broadcast(np.asarray(lo), np.asarray(hi)).shape, np.nan)
-        return true_workload(lo, hi, self.edge_lo, self.bin_m, self.patrol_depth)
+        if not self.frames or t is None:
+            return true_workload(lo, hi, self.edge_lo, self.bin_m, self.patrol_depth)
+        return self._workload_in_time(lo, hi, np.asarray(t, dtype=float))
+
+    def _workload_in_time(self, lo: np.ndarray | float, hi: np.ndarray | float,
+                          t: np.ndarray) -> np.ndarray:
+        """``workload`` on the frames: each sample's between the frames either side of
+        its time, in proportion; one frame's alone where both are the same (before,
+        between and after the changes), or before the first and after the last."""
+        shape = np.broadcast_shapes(np.shape(lo), np.shape(hi), t.shape)
+        lo_a = np.broadcast_to(np.asarray(lo, dtype=float), shape)
+        hi_a = np.broadcast_to(np.asarray(hi, dtype=float), shape)
+        t_a = np.broadcast_to(t, shape)[(0,) * (len(shape) - 1)] if shape else t
+        ft = np.asarray(self.frame_t, dtype=float)
+        out = np.empty(shape)
+        j = np.clip(np.searchsorted(ft, t_a, side="right") - 1, 0, ft.size - 1)
+        for f in np.unique(j):
+            cols = j == f
+            here = true_workload(lo_a[..., cols], hi_a[..., cols], self.edge_lo, self.bin_m,
+                                 self.frames[f])
+            if f + 1 < ft.size and list(self.frames[f + 1]) != list(self.frames[f]):
+                there = true_workload(lo_a[..., cols], hi_a[..., cols], self.edge_lo,
+                                      self.bin_m, self.frames[f + 1])
+                w = np.clip((t_a[cols] - ft[f]) / (ft[f + 1] - ft[f]), 0.0, 1.0)
+                here = here + w * (there - here)
+            out[..., cols] = here
+        return out
 
     @property
     def total_workload(self) -> float:
-        """True workload of the whole edge, m^2; NaN without a depth profile."""
+        """True workload of the whole edge, m^2 (the map's last, if it changes); NaN
+        without a depth profile."""
+        if self.frames:
+            return float(true_workload(self.edge_lo, self.edge_hi, self.edge_lo, self.bin_m,
+                                       self.frames[-1]))
         return float(self.workload(self.edge_lo, self.edge_hi))
+
+    def total_workload_at(self, t: np.ndarray) -> float | np.ndarray:
+        """True workload of the whole edge at the times ``t``; ``total_workload`` (one
+        number) on a static map."""
+        if not self.frames or len(self.patrol_depth) == 0:
+            return self.total_workload
+        return self.workload(np.full(np.shape(t), self.edge_lo),
+                             np.full(np.shape(t), self.edge_hi), t)
 
 
 def hold(
@@ -686,7 +739,7 @@ def team_errors(
         pairs=[(robots[a], robots[b]) for a, b in index_pairs],
         phase=errors(position_phase(x, lo, hi, direction), True),
         phase_path=errors(np.asarray(phase_path, dtype=float), True),
-        workload=errors(edge.workload(lo, hi), False),
+        workload=errors(edge.workload(lo, hi, t), False),
         workload_agents=errors(seen_workload, False),
         phase_agents=errors(seen_phase, True),
         ids=robots,
@@ -694,21 +747,82 @@ def team_errors(
     )
 
 
-def mean_workload(t: np.ndarray, live: np.ndarray, total_workload: float,
+def mean_workload(t: np.ndarray, live: np.ndarray, total_workload: float | np.ndarray,
                   last: float = STEADY_LAST) -> float:
     """Mean workload per robot over the last ``last`` of the run: the edge's total true
-    workload over the number of live robots, averaged over the samples."""
+    workload (one number, or one per sample on a map that changes) over the number of
+    live robots, averaged over the samples."""
     live = np.asarray(live, dtype=bool)
     team = live.sum(axis=0) if live.size else np.zeros(np.asarray(t).size)
     sel = window_mask(t, 1.0 - last, 1.0) & (team > 0)
     if not sel.any():
         return math.nan
+    if np.ndim(total_workload):
+        return float(np.mean(np.asarray(total_workload)[sel] / team[sel]))
     return float(np.mean(total_workload / team[sel]))
+
+
+def change_recovery(
+    errors: TeamErrors,
+    edge: EdgeModel,
+    cycle_s: np.ndarray,
+    band_rel: float = WORKLOAD_REL_BAND,
+    smooth_s: float = CONVERGE_SMOOTH_S,
+) -> list[dict[str, float]]:
+    """How the team rebalanced after each change of the map (``edge.changes``): the
+    workload band at the change's end (``band_rel`` of the mean true workload per live
+    robot then), the team's cycle then (the median of the cycles the live agents
+    followed, ``cycle_s`` of shape (robots, samples)), and from the change's end (up to
+    the next change's start, or the run's end) the time until max-over-pairs |e_Psi|,
+    averaged over the trailing ``smooth_s``, is first back in the band (``back_s``,
+    0 if it never left) and after which it stays there (``settled_s``), each also in
+    cycles; ``peak_rel`` its largest from the change's start, and ``during_rel`` the
+    mean |e_Psi| over the pairs and the window, both over the mean workload. NaN where
+    not measurable (never back, no sample after the change)."""
+    t = errors.t
+    worst = running_mean(t, max_over_pairs(errors.workload), smooth_s)
+    live = np.asarray(errors.live, dtype=bool)
+    team = live.sum(axis=0) if live.size else np.zeros(t.size)
+    total = np.broadcast_to(np.asarray(edge.total_workload_at(t), dtype=float), t.shape)
+    cycle = np.where(live, np.asarray(cycle_s, dtype=float), np.nan) if live.size else live
+    changes = edge.changes
+    out = []
+    for i, (t0, t1) in enumerate(changes):
+        until = changes[i + 1][0] if i + 1 < len(changes) else math.inf
+        after = np.flatnonzero((t >= t1 - 1e-9) & (t < until))
+        row = {"t0": t0, "t1": t1, "band_m2": math.nan, "cycle_s": math.nan,
+               "back_s": math.nan, "back_cycles": math.nan, "settled_s": math.nan,
+               "settled_cycles": math.nan, "peak_rel": math.nan, "during_rel": math.nan}
+        out.append(row)
+        if after.size == 0 or team[after[0]] == 0:
+            continue
+        k1 = after[0]
+        mean = float(total[k1] / team[k1])
+        band = band_rel * mean
+        cycles = cycle[:, k1][np.isfinite(cycle[:, k1]) & (cycle[:, k1] > 0)]
+        period = float(np.median(cycles)) if cycles.size else math.nan
+        known = after[np.isfinite(worst[after])]
+        inside = worst[known] <= band
+        back = float(t[known[inside][0]] - t1) if inside.any() else math.nan
+        outside = known[~inside]
+        if outside.size == 0:
+            settled = 0.0 if known.size else math.nan
+        else:
+            later = known[known > outside[-1]]
+            settled = float(t[later[0]] - t1) if later.size else math.nan
+        window = (t >= t0) & (t <= t1)
+        since = (t >= t0) & (t < until)
+        per = np.where(team > 0, total / np.maximum(team, 1), np.nan)
+        rel = np.abs(np.asarray(errors.workload, dtype=float)[:, window]) / per[window]
+        row.update(band_m2=band, cycle_s=period, back_s=back, back_cycles=back / period,
+                   settled_s=settled, settled_cycles=settled / period,
+                   peak_rel=nanmax(worst[since] / per[since]), during_rel=nanmean(rel))
+    return out
 
 
 def error_measures(
     errors: TeamErrors,
-    total_workload: float,
+    total_workload: float | np.ndarray,
     last: float = STEADY_LAST,
     phase_band: float = PHASE_BAND_RAD,
     workload_band: float = WORKLOAD_BAND_M2,
@@ -783,7 +897,7 @@ def team_measures(
     x, y, direction = (np.atleast_2d(np.asarray(v, dtype=float)) for v in (x, y, direction))
     alive = np.ones(x.shape, dtype=bool) if live is None else np.asarray(live, dtype=bool)
     errors = team_errors(t, x, y, lo, hi, direction, seen_phase, seen_workload, edge, alive)
-    out = error_measures(errors, edge.total_workload, last)
+    out = error_measures(errors, edge.total_workload_at(t), last)
     if t.size < 2:
         nothing = idleness_measures([], math.nan, math.nan, math.nan, edge.length)
         return {**out, **nothing, "still_frac_max": math.nan}

@@ -33,6 +33,9 @@ def edge_model(run: RunData) -> m.EdgeModel | None:
         patrol_depth=tuple(info.get("patrol_depth") or ()),
         edge_y=tuple(info.get("edge_y") or ()),
         robot_radius=float(info.get("robot_radius", 0.17)),
+        frame_t=tuple(t for t, _ in run.depth_frames),
+        frames=tuple(tuple(d) for _, d in run.depth_frames),
+        change_windows=tuple(info.get("change_windows") or ()),
     )
 
 
@@ -88,6 +91,7 @@ class RunTable:
     path: np.ndarray  # the path-length phase along each track as recorded, held
     live: np.ndarray
     edge: m.EdgeModel | None
+    cycle: np.ndarray  # the team's cycle each agent followed, s
 
     @cached_property
     def errors(self) -> ErrorSeries:
@@ -112,7 +116,8 @@ def run_table(run: RunData) -> RunTable:
     ids = sorted(run.states)  # every agent that published
     unknown = np.full(t.shape, np.nan)
     rows: dict[str, list[np.ndarray]] = {
-        name: [] for name in ("x", "y", "lo", "hi", "direction", "phase", "workload", "path")
+        name: [] for name in ("x", "y", "lo", "hi", "direction", "phase", "workload", "path",
+                              "cycle")
     }
     for i in ids:
         st = run.states[i]
@@ -121,6 +126,7 @@ def run_table(run: RunData) -> RunTable:
         rows["direction"].append(m.hold(st.t, st.direction, t, age))
         rows["phase"].append(m.hold(st.t, st.phase, t, age))
         rows["workload"].append(m.hold(st.t, st.workload, t, age))
+        rows["cycle"].append(m.hold(st.t, st.cycle_s, t, age))
         tr = tracks.get(i)
         if tr is None:
             rows["x"].append(unknown)
@@ -134,7 +140,8 @@ def run_table(run: RunData) -> RunTable:
             rows["path"].append(m.hold(tr.t, along_path, t, age))
     a = {name: np.array(r).reshape(len(ids), t.size) for name, r in rows.items()}
     return RunTable(run, t, ids, a["x"], a["y"], a["lo"], a["hi"], a["direction"], a["phase"],
-                    a["workload"], a["path"], live_matrix(run, t, ids), edge_model(run))
+                    a["workload"], a["path"], live_matrix(run, t, ids), edge_model(run),
+                    a["cycle"])
 
 
 def error_series(run: RunData) -> ErrorSeries:

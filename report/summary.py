@@ -76,6 +76,8 @@ KEYS = (
     "workload_max_agents_m2",
     "workload_rel_sse_agents",
     "positions_from",
+    "change",
+    "changes",
 )
 
 # The goals every report is held to (DESIGN.md "Beyond the thesis's scenarios"): the
@@ -209,7 +211,7 @@ def compute_summary(
     loc_mean, loc_p95 = summary_stats((loc or localization_errors(run)).pooled("pf"))
     info = run.info
     edge = table.edge
-    errors = m.error_measures(s, edge.total_workload if edge else math.nan, STEADY_LAST,
+    errors = m.error_measures(s, edge.total_workload_at(s.t) if edge else math.nan, STEADY_LAST,
                               phase_band, workload_band, CONVERGE_SMOOTH_S)
     rev = rev or revisit(run, table.t)
     gap, _ = coverage(table)
@@ -245,6 +247,9 @@ def compute_summary(
         "loc_error_p95_m": loc_p95,
         # "truth", or "poses" for a recording without ground truth (hardware)
         "positions_from": run.positions_from,
+        # a map that changes: the changes as given, and how the team rebalanced after each
+        "change": info.get("change", ""),
+        "changes": m.change_recovery(s, edge, table.cycle) if edge is not None else [],
     }
     assert set(out) == set(KEYS), set(out) ^ set(KEYS)
     return json_safe({key: out[key] for key in KEYS})

@@ -156,6 +156,20 @@ class GridMap:
     def _col(self, x: float) -> int:
         return math.floor(x / self.cell_m)
 
+    @property
+    def edge_rows(self) -> np.ndarray:
+        """Per column, the lowest non-water row (-1 in a column without ice)."""
+        return self._edge_row
+
+    @property
+    def algae_extent_m(self) -> np.ndarray:
+        """Per column, the algae's extent above the local edge, m (0 if none)."""
+        return self._algae_m
+
+    def cell_of(self, x: float, y: float) -> tuple[int, int] | None:
+        """The (row, column) of the cell holding (x, y); None off the grid."""
+        return self._cell(x, y)
+
     def _cell(self, x: float, y: float) -> tuple[int, int] | None:
         col = math.floor(x / self.cell_m)
         row = math.floor((y - self._y0) / self.cell_m)
@@ -191,12 +205,16 @@ class GridMap:
         """max(min_depth, algae extent at x) under the ice."""
         return max(self.min_depth, self.algae_depth(x))
 
-    def patrol_depth_bins(self, bin_m: float = 0.1) -> list[float]:
+    def patrol_depth_bins(self, bin_m: float = 0.1, algae_m: np.ndarray | None = None
+                          ) -> list[float]:
         """True patrol depth per bin of width ``bin_m`` over [edge_lo, edge_hi]: the
-        mean over the cell columns whose centres fall in the bin."""
+        mean over the cell columns whose centres fall in the bin. ``algae_m``: the
+        algae's extent per column to take instead of the map's own (a map that
+        changes, ``simworld.change``)."""
         lo, hi = self.edge_lo, self.edge_hi
         n_bins = max(1, math.ceil((hi - lo) / bin_m - 1e-9))
-        depths = np.maximum(self._algae_m, self.min_depth)
+        extent = self._algae_m if algae_m is None else algae_m
+        depths = np.maximum(extent, self.min_depth)
         centres = (np.arange(self.cols) + 0.5) * self.cell_m
         out: list[float] = []
         for b in range(n_bins):
@@ -205,7 +223,9 @@ class GridMap:
             if sel.any():
                 out.append(round(float(depths[sel].mean()), 9))
             else:  # bins finer than the cells: the cell under the bin's centre
-                out.append(self.patrol_depth(0.5 * (a + z)))
+                col = self._col(0.5 * (a + z))
+                at = float(extent[col]) if 0 <= col < self.cols else 0.0
+                out.append(max(self.min_depth, at))
         return out
 
     def edge_y_bins(self, bin_m: float = 0.1) -> list[float]:

@@ -28,6 +28,7 @@ import time
 
 import zenoh
 
+from simworld.change import CHANGE_HELP, ChangeError, ChangingMap, changing_map
 from simworld.laser import Laser, laser_row
 from simworld.maps import ROBOT_ROOM_M
 from simworld.sensors import PROFILES, LabLaser, LabSensing, Slip, Walker, clutter_legs, profile
@@ -178,6 +179,8 @@ def build_parser() -> argparse.ArgumentParser:
         default=10.0,
         help="wall seconds to wait at a --hold-at before going on without it (10)",
     )
+    p.add_argument("--change", action="append", default=[], metavar="SPEC",
+                   help=CHANGE_HELP)
     p.add_argument(
         "--wait-recorder",
         action="store_true",
@@ -332,6 +335,11 @@ class WorldProcess(WorldShell):
         # for the recorder only, after the agents' inputs; one message for the team
         self.pub_truth.put(encode(Truth.of_team(t, k, truth)))
 
+    def frame_due(self, k: int) -> bool:
+        """Whether tick k begins a new frame of a changing map's true depth."""
+        change: ChangingMap | None = self.world.change
+        return change is not None and change.frame_due(k, self.dt)
+
     # the clock ---------------------------------------------------------------
     def wait_for_team(self) -> bool:
         """Block until all n agents (and the recorder if asked) are alive."""
@@ -356,7 +364,7 @@ class WorldProcess(WorldShell):
         k = 0
         while k < total and not self.stopping:
             t = k * dt
-            if k and k % INFO_EVERY_TICKS == 0:
+            if k and (k % INFO_EVERY_TICKS == 0 or self.frame_due(k)):
                 self.publish_info()
             self.publish_sensing(k, t)
             pending = self.live - self.silent - set(self.booting)
@@ -426,7 +434,7 @@ class WorldProcess(WorldShell):
         k = 0
         while k < total and not self.stopping:
             t = k * dt
-            if k and k % INFO_EVERY_TICKS == 0:
+            if k and (k % INFO_EVERY_TICKS == 0 or self.frame_due(k)):
                 self.publish_info()
             self.publish_sensing(k, t)
             began = time.monotonic()
@@ -516,9 +524,18 @@ def main(argv: list[str] | None = None) -> int:
     if gmap is None:
         return 2
     lab = profile(args.sensors)
+    try:
+        change = changing_map(gmap, args.change, args.scale, args.seed)
+    except ChangeError as exc:
+        print(f"btrack world: {exc}", file=sys.stderr)
+        return 2
+    if change is not None and lab is not None:
+        print("btrack world: --change: the lab sensors read a static map only, so far; "
+              "use --sensors ideal", file=sys.stderr)
+        return 2
     world = World(gmap, args.robots, args.start, args.seed, args.odom_noise, args.team,
                   odom_turn_noise=args.odom_turn_noise,
-                  slip=Slip(lab, args.seed) if lab is not None else None)
+                  slip=Slip(lab, args.seed) if lab is not None else None, change=change)
     total = round(args.duration / args.dt)
 
     with bounded_session(options_from_args(args), "btrack world") as session:

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from simworld.change import ChangingMap
 from simworld.kinematics import integrate_arc, limit_wheels
 from simworld.maps import MIN_DEPTH_M, ROBOT_ROOM_M, GridMap
 from simworld.sensors import Slip, pose_back
@@ -98,7 +99,8 @@ def parked_poses(gmap: GridMap, count: int) -> list[tuple[float, float, float]]:
 class World:
     """n differential-drive robots on a ``GridMap``: the first ``team`` (default all)
     start on the start line in equal segments, the rest are parked behind it until an
-    agent drives them."""
+    agent drives them. With ``change`` (a ``ChangingMap`` of ``gmap``) the algae the
+    robots sense is that map's at the world's time."""
 
     def __init__(
         self,
@@ -110,6 +112,7 @@ class World:
         team: int | None = None,
         odom_turn_noise: float | None = None,
         slip: Slip | None = None,
+        change: ChangingMap | None = None,
     ) -> None:
         team = n if team is None else team
         if not 1 <= team <= n:
@@ -136,6 +139,16 @@ class World:
         self.slip = slip  # None: the wheels never slip (the ideal world)
         self.t = 0.0
         self.k = 0
+        if change is not None and change.base is not gmap:
+            raise ValueError("the changing map must be a change of the world's map")
+        self.change = change
+        self._extent: np.ndarray | None = None  # the changing map's algae now, if changed
+        self._changed_to(self.t)
+
+    def _changed_to(self, t: float) -> None:
+        """The map at time ``t``: the changed algae's extents once a change began."""
+        c = self.change
+        self._extent = c.extent_cells(t) if c is not None and c.started(t) else None
 
     def truth(self, i: int) -> tuple[float, float, float]:
         return self._x[i], self._y[i], self._th[i]
@@ -158,7 +171,8 @@ class World:
         x, y = self._x[i], self._y[i]
         return Reading(
             ice=self.map.ice_at(x, y),
-            algae=self.map.algae_at(x, y),
+            algae=(self.map.algae_at(x, y) if self._extent is None or self.change is None
+                   else self.change.algae_at(x, y, self._extent)),
             odom_dist_m=self._odom_d[i],
             odom_dtheta=self._odom_dth[i],
         )
@@ -188,6 +202,8 @@ class World:
             )
         self.k += 1
         self.t = self.k * dt
+        if self.change is not None:
+            self._changed_to(self.t)
 
     def info(self, bin_m: float | None = None) -> dict[str, object]:
         """The world's part of wire.WorldInfo (edge, depths, geometry). The true depths
@@ -195,11 +211,18 @@ class World:
         report's true workload is the map's, not a binned copy of it (a step of the
         algae inside a 0.1 m bin would otherwise move with the bin's side)."""
         bin_m = self.map.cell_m if bin_m is None else bin_m
+        change = self.change
+        if change is not None:  # the depth in force from now, and when the map changes
+            moving: dict[str, object] = {
+                "patrol_depth": change.patrol_depth_bins(self.t, bin_m), "depth_t": self.t,
+                "change": change.spec, "change_windows": change.windows}
+        else:
+            moving = {"patrol_depth": self.map.patrol_depth_bins(bin_m)}
         return {
             "edge_lo": self.map.edge_lo,
             "edge_hi": self.map.edge_hi,
             "bin_m": bin_m,
-            "patrol_depth": self.map.patrol_depth_bins(bin_m),
+            **moving,
             "edge_y": self.map.edge_y_bins(bin_m),
             "robot_radius": ROBOT_RADIUS_M,
             "min_depth": MIN_DEPTH_M,

@@ -124,6 +124,7 @@ HIL_REFUSED = {
     "clouds_every": ["--clouds-every", "5"],
     "live": ["--live"],
     "engine": ["--engine", "inprocess"],
+    "change": ["--change", "grow:0.5@10-20"],
 }
 HIL_PLANNED = {
     "robots": ["--robots", "2"],

@@ -304,9 +304,22 @@ class WorldInfo:
     # run's epoch (as its bridges' do), so it begins at the tick its team was up by, and
     # its last is first_k + duration_s / dt - 1
     first_k: int = 0
+    # A map that changes during the run (issue 18): the changes as ``--change`` gave
+    # them ("" for a static map), their windows flat [t0, t1, t0, t1, ...] in s, and the
+    # simulated time from which this message's patrol_depth is the true one. The world
+    # sends it again at every frame of a change (simworld.change.FRAME_EVERY_S and at a
+    # window's ends); between two frames the true depth is the line between them.
+    change: str = ""
+    change_windows: list[float] = field(default_factory=list)
+    depth_t: float = 0.0
 
     def check(self) -> None:
         _require(self.edge_lo < self.edge_hi and self.bin_m > 0, "bad edge or bin")
+        w = self.change_windows
+        _require(len(w) % 2 == 0 and all(a <= b for a, b in zip(w, w[1:], strict=False))
+                 and all(w[i] < w[i + 1] for i in range(0, len(w), 2))
+                 and all(v >= 0 for v in w), "change_windows: ordered [t0, t1, ...] pairs")
+        _require(self.depth_t >= 0, "negative depth_t")
         _require(all(d >= 0 for d in self.patrol_depth), "negative patrol depth")
         _require(self.robots >= 1 and self.dt > 0, "bad robots or dt")
         _require(self.first_k >= 0, "negative first tick")
