@@ -238,12 +238,35 @@ class AgentNode:
             if why is not None:
                 self._reject(key, why)
                 return
+            if self._contested(key, state, before):
+                return
         if self.membership.heard(state.robot, state.k, state) and side is None:
             # a candidate's state: it is our neighbour now
             self.found += 1
             self._log_some(self.found, f"robot {state.robot}'s state of tick {state.k} came, "
                            "its token has not: it is live")
             self._follow_neighbours()
+
+    def _contested(self, key: str, state: AgentState, before: AgentState | None) -> bool:
+        """A second plausible state of a neighbour's tick, unlike the one kept: one of
+        the two is a lie the rules cannot tell (a boundary not ours to check, say), and
+        which came first is a matter of timing. The one that moves the sender's
+        boundaries less from its state before is kept, the other counted and dropped;
+        True if ``state`` is the one dropped."""
+        kept = self.membership.latest(state.robot, state.k)
+        if kept is None or kept.k != state.k or kept == state:
+            return False
+        if before is None:  # nothing to tell them by: the first stays
+            self._reject(key, f"a second state of tick {state.k}, unlike the first")
+            return True
+
+        def step(s: AgentState) -> float:
+            return abs(s.lo - before.lo) + abs(s.hi - before.hi)
+
+        further = step(state) >= step(kept)
+        self._reject(key, f"two unlike states of tick {state.k}; the one further from "
+                     f"tick {before.k}'s boundaries dropped")
+        return further
 
     def _unpark(self, every: bool = False) -> None:
         """Judge the states parked for ticks we now have sensing of (``every``: all of
