@@ -219,15 +219,13 @@ class AgentNode:
             # a tick waits (a forgery may come before the real state or after it, and
             # neither may displace the other) and each is judged in turn.
             rk = (state.robot, state.k)
-            held = self.parked.setdefault(rk, [])
+            held = self.parked.get(rk, [])
             if any(state == other for _, other in held):
                 return
-            if len(held) >= COPIES_PARKED or len(self.parked) > PARKED_STATES:
-                if not held:
-                    del self.parked[rk]
+            if len(held) >= COPIES_PARKED or (not held and len(self.parked) >= PARKED_STATES):
                 self._reject(key, f"too many states wait for tick {state.k}")
                 return
-            held.append((key, state))
+            self.parked.setdefault(rk, []).append((key, state))
             return
         lower, upper = self.membership.neighbours()
         side = "lower" if state.robot == lower else "upper" if state.robot == upper else None

@@ -240,7 +240,7 @@ class Injector:
         if not out.taken:
             return
         self.t = max(self.t, out.taken[-1].t)
-        if tick.t >= self._next_at:
+        if self.t >= self._next_at:
             self.wake.set()
 
     def start_agent(self, agent: int) -> Child:
