@@ -176,6 +176,15 @@ def replay(session: zenoh.Session, keys: Keys, items: list[Item], args: argparse
                             f"{pacer.answered}): is its listener running?")
             publishers[item.topic].put(item.payload)
             sent[item.topic] += 1
+        # The listener's answer to the last tick too, before the session closes: what
+        # the last tick set off is then on the bus, not still in a listener's hands.
+        last_k = max((it.k for it in items if it.k is not None), default=None)
+        if pacer is not None and last_k is not None:
+            with answered:
+                if not answered.wait_for(lambda: pacer.answered >= last_k, args.pace_timeout):
+                    raise ReplayError(
+                        f"no message on {args.pace_on} of the last tick, {last_k}, within "
+                        f"{args.pace_timeout:g} s (its last: tick {pacer.answered})")
     finally:
         if sub is not None:
             sub.undeclare()
