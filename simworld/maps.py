@@ -54,6 +54,10 @@ class GridMap:
     _algae_m: np.ndarray = field(init=False, repr=False)  # algae extent above the local edge
     _y0: float = field(init=False, repr=False)  # y of the bottom of row 0
     _closed_edge: ClosedEdge | None = field(init=False, repr=False, default=None)
+    # the bins of patrol_depth_bins and edge_y_bins by width: the map does not change, and
+    # the world tells them every INFO_EVERY_TICKS (0.15 s each on a 30 m edge's cells)
+    _bins: dict[tuple[str, float], tuple[float, ...]] = field(
+        init=False, repr=False, default_factory=dict)
 
     def __post_init__(self) -> None:
         ice = np.asarray(self.ice, dtype=bool)
@@ -211,9 +215,14 @@ class GridMap:
         mean over the cell columns whose centres fall in the bin. ``algae_m``: the
         algae's extent per column to take instead of the map's own (a map that
         changes, ``simworld.change``)."""
+        if algae_m is None:
+            key = ("depth", bin_m)
+            if key not in self._bins:
+                self._bins[key] = tuple(self.patrol_depth_bins(bin_m, self._algae_m))
+            return list(self._bins[key])
         lo, hi = self.edge_lo, self.edge_hi
         n_bins = max(1, math.ceil((hi - lo) / bin_m - 1e-9))
-        extent = self._algae_m if algae_m is None else algae_m
+        extent = algae_m
         depths = np.maximum(extent, self.min_depth)
         centres = (np.arange(self.cols) + 0.5) * self.cell_m
         out: list[float] = []
@@ -232,6 +241,12 @@ class GridMap:
         """The local edge's y per bin of width ``bin_m`` over [edge_lo, edge_hi] (the bins
         of ``patrol_depth_bins``): the mean over the cell columns holding ice whose
         centres fall in the bin."""
+        key = ("edge", bin_m)
+        if key not in self._bins:
+            self._bins[key] = tuple(self._edge_y_bins(bin_m))
+        return list(self._bins[key])
+
+    def _edge_y_bins(self, bin_m: float) -> list[float]:
         lo, hi = self.edge_lo, self.edge_hi
         n_bins = max(1, math.ceil((hi - lo) / bin_m - 1e-9))
         has_ice = self._edge_row >= 0

@@ -282,3 +282,16 @@ def test_world_info_fields() -> None:
     assert info.robot_radius == 0.17 and info.min_depth == 0.3 and info.bin_m == 0.01
     assert len(info.patrol_depth) == 600  # the map's own 1 cm cells
     assert info.edge_y == [0.0] * 600  # the built-in maps' edge is straight at y = 0
+
+
+def test_a_maps_bins_are_kept_and_a_caller_cannot_change_them():
+    """The world tells its true depth and edge every 100 ticks: the bins are worked out
+    once per width, the same as worked out afresh, and a caller's copy is its own."""
+    gmap = load_map("half-algae", 0.05, 1)
+    depth = gmap.patrol_depth_bins(0.1)
+    edge = gmap.edge_y_bins(0.1)
+    assert depth == gmap.patrol_depth_bins(0.1, gmap.algae_extent_m)
+    assert len(depth) == len(edge) and max(depth) > min(depth)
+    depth[0] = edge[0] = 99.0
+    assert gmap.patrol_depth_bins(0.1)[0] != 99.0 and gmap.edge_y_bins(0.1)[0] != 99.0
+    assert len(gmap.patrol_depth_bins(0.05)) == 2 * len(gmap.patrol_depth_bins(0.1))
