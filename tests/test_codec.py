@@ -3,6 +3,7 @@
 import math
 
 import msgpack
+import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
@@ -196,3 +197,16 @@ def test_a_record_builds_its_message_and_one_of_another_contract_is_refused():
     renamed = {("lo_m" if n == "lo" else n): v for n, v in raw.items()}
     with pytest.raises(DecodeError, match="missing \\['lo'\\], unknown \\['lo_m'\\]"):
         from_record(AgentState, renamed)
+
+
+@given(st.floats(allow_nan=False, allow_infinity=False), st.integers(0, 10**6),
+       st.integers(0, 300), st.floats(-10, 10), st.floats(-10, 10))
+def test_encode_writes_what_msgpack_writes_of_the_fields(t, k, robot, v, omega):
+    """The wire's bytes are msgpack's map of the fields in order (any msgpack peer reads
+    them), and a numpy scalar where a float goes is written as the float it holds."""
+    cmd = Cmd(t, k, robot, v, omega)
+    fields = {"t": t, "k": k, "robot": robot, "v": v, "omega": omega}
+    assert encode(cmd) == msgpack.packb(fields, use_bin_type=True)
+    assert encode(Cmd(np.float64(t), k, robot, np.float64(v), omega)) == encode(cmd)
+    with pytest.raises(TypeError):
+        encode(Cmd(t, k, robot, object(), omega))  # type: ignore[arg-type]
