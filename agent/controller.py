@@ -268,7 +268,7 @@ class Controller:
         rate = TWO_PI / self.cycle_s
         self.depth_map.tick(dt, self.cycle_s)
         steer = self.patrol.step(x, y, theta, ice, algae, self.lo, self.hi,
-                                 TeamInput(self.clock, self.passes, self.hurry))
+                                 TeamInput(self.clock, self.passes, self.hurry, dt))
         direction = self.patrol.view.direction
         phase = position_to_phase(x, self.lo, self.hi, direction)
         if self.phase_des is None:

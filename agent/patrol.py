@@ -125,6 +125,15 @@ class PatrolConfig:
     # An arc that has turned this much (rad) goes on at arc speed; before that the
     # controller holds it until the team's phase lets it begin.
     arc_begun_rad: float = 0.05
+    # The ice and algae sensors as the robot has them (0, 0: readings of where it is,
+    # as the ideal simulation gives them). A reading this late (s), through a comparator
+    # that switches this far (m, the whole dead band) either side of the edge, changes
+    # after the robot is past the edge by half the band plus how far it went in the
+    # latency: every edge, crossing and algae end a leg finds is placed back by that,
+    # along the way the robot went. From the sensors' data sheet (``btrack sim
+    # --sensors lab`` gives its profile's figures, simworld.sensors).
+    sensor_latency_s: float = 0.0
+    sensor_band_m: float = 0.0
 
     def __post_init__(self) -> None:
         if self.passes_per_sweep < 1:
@@ -150,6 +159,8 @@ class PatrolConfig:
         if self.past_edge_m < 0 or not 0 < self.min_last_pass <= 1 or self.arc_begun_rad < 0:
             raise ValueError("past_edge_m and arc_begun_rad must be >= 0, "
                              "min_last_pass in (0, 1]")
+        if self.sensor_latency_s < 0 or self.sensor_band_m < 0:
+            raise ValueError("sensor_latency_s and sensor_band_m must be >= 0")
 
 
 @dataclass(frozen=True)
@@ -174,6 +185,8 @@ class TeamInput:
     # The robot is well behind the team: measure nothing slowly (its samples and
     # crossings are ROUGH).
     hurry: bool = False
+    # The control period, s: how far a late reading moved (``sensor_latency_s``).
+    dt: float | None = None
 
 
 @dataclass(frozen=True)
@@ -546,15 +559,35 @@ class Patrol:
         k = c.heading_gain * wrap_pi(desired - theta)
         return min(max(k, -c.max_curvature), c.max_curvature)
 
+    def _sensed(self, y: float, prev_y: float | None, dt: float | None) -> float:
+        """Where along the leg what a reading changed on lies: the middle of this tick
+        and the last, back by how far the sensors' latency and dead band put the
+        change past it (``sensor_latency_s``, ``sensor_band_m``; none by default)."""
+        if prev_y is None:
+            return y
+        mid = 0.5 * (prev_y + y)
+        lag = self._lag(y, prev_y, dt)
+        return mid - lag if lag else mid
+
+    def _lag(self, y: float, prev_y: float | None, dt: float | None) -> float:
+        """How far past where it changed (along y, signed as the robot went) a reading
+        changes: the latency's distance at this tick's speed and half the dead band."""
+        c = self.config
+        if prev_y is None or not (c.sensor_latency_s or c.sensor_band_m) or y == prev_y:
+            return 0.0
+        step = y - prev_y
+        late = step * c.sensor_latency_s / dt if dt else 0.0
+        return late + math.copysign(0.5 * c.sensor_band_m, step)
+
     def _measure_on_the_way_out(self, x: float, y: float, prev_y: float | None,
-                                ice: bool, algae: bool) -> None:
+                                ice: bool, algae: bool, dt: float | None = None) -> None:
         """The out leg samples the depth profile too, on its own pass line: coming out
         from the turn depth, algae first seen marks the extent there (from the ice edge
         the in-legs found); algae from the start only bounds it from below, and then
         nothing is recorded. A ROUGH sample if it came upon the algae at full speed
         (the map had no depth for the column), else a PRECISE one."""
         out = self.out_leg
-        mid = y if prev_y is None else 0.5 * (prev_y + y)
+        mid = self._sensed(y, prev_y, dt)
         if out.started_in_algae is None:
             out.started_in_algae = algae
         if algae and out.algae_top is None:
@@ -574,7 +607,8 @@ class Patrol:
                 self.depth_map.record(at, depth, PRECISE if self.out_slow else ROUGH,
                                       top if edge is not None else None)
 
-    def _measured_depth(self, depth: float, prev_y: float | None, y: float) -> float:
+    def _measured_depth(self, depth: float, prev_y: float | None, y: float,
+                        dt: float | None) -> float:
         """The patrol depth of this pass: the minimum if algae ended before it, else
         the middle of the last tick with algae and this first tick without, from the
         ice edge the in-legs found."""
@@ -588,9 +622,13 @@ class Patrol:
         edge = self.depth_map.edge_y(self.x)
         if edge is not None:
             measured += leg.entry_y - edge
+        lag = self._lag(y, prev_y, dt)
+        if lag:
+            measured -= lag
         return max(c.min_depth_m, measured)
 
-    def _algae_top(self, depth: float, prev_y: float | None) -> float | None:
+    def _algae_top(self, depth: float, prev_y: float | None, y: float,
+                   dt: float | None) -> float | None:
         """Where this in-leg saw the algae end (the y ``_measured_depth`` measures from
         the edge); None if its depth is not measured from the edge (the minimum, or
         the deepest the patrol goes) or no crossing is known here yet."""
@@ -599,7 +637,9 @@ class Patrol:
                 or leg.algae_depth < c.min_depth_m or leg.entry_y is None
                 or self.depth_map.edge_y(self.x) is None):
             return None
-        return leg.entry_y + 0.5 * (leg.algae_depth + depth)
+        top = leg.entry_y + 0.5 * (leg.algae_depth + depth)
+        lag = self._lag(y, prev_y, dt)
+        return top - lag if lag else top
 
     def step(self, x: float, y: float, theta: float, ice: bool, algae: bool,
              lo: float, hi: float, team: TeamInput = NO_TEAM) -> Steer:
@@ -647,7 +687,7 @@ class Patrol:
         if self._sees_the_ice(tick):
             y, prev_y = tick.y, tick.prev_y
             # The edge lies between this tick and the last one: take the middle.
-            leg.entry_y = y if prev_y is None else 0.5 * (prev_y + y)
+            leg.entry_y = self._sensed(y, prev_y, tick.team.dt)
             # A leg that began under the ice (an agent started where its robot
             # stood) crossed no edge: it measures nothing.
             leg.measures = leg.from_water
@@ -680,11 +720,12 @@ class Patrol:
             if tick.algae:
                 leg.algae_depth = depth
             if (depth >= c.min_depth_m and not tick.algae) or depth >= c.max_depth_m:
-                self.last_depth = self._measured_depth(depth, tick.prev_y, tick.y)
+                self.last_depth = self._measured_depth(depth, tick.prev_y, tick.y,
+                                                       tick.team.dt)
                 if leg.measures:
                     self.depth_map.record(  # where it was measured
                         tick.x, self.last_depth, PRECISE if self.was_measuring else ROUGH,
-                        self._algae_top(depth, tick.prev_y))
+                        self._algae_top(depth, tick.prev_y, tick.y, tick.team.dt))
                 leg.turn_depth = self._turn_depth(tick.lo, tick.hi, depth, tick.team.clock)
         return Motion.TURN_UNDER if self._deep_enough(depth) else None
 
@@ -704,7 +745,8 @@ class Patrol:
             if out.exit_y is None:
                 out.exit_y = self.return_y + c.margin_out_m
         else:
-            self._measure_on_the_way_out(tick.x, tick.y, tick.prev_y, tick.ice, tick.algae)
+            self._measure_on_the_way_out(tick.x, tick.y, tick.prev_y, tick.ice, tick.algae,
+                                         tick.team.dt)
         far = out.start_y is not None and out.start_y - tick.y >= c.max_depth_m + c.max_search_m
         if far and out.exit_y is None:  # the ice never ended: a sensor or the pose
             out.exit_y = tick.y + c.margin_out_m  # is wrong; turn back out here

@@ -56,6 +56,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="fix the common cycle period, s (default: from the team's need)")
     p.add_argument("--passes", type=int,
                    help="at least this many passes per sweep of a segment (more on long ones)")
+    p.add_argument("--sensor-latency", type=float, metavar="S",
+                   help="how late the ice and algae readings are, s (the data sheet's; "
+                   "edges found are placed back by it)")
+    p.add_argument("--sensor-band", type=float, metavar="M",
+                   help="the ice and algae comparators' dead band, m (the whole band)")
     p.add_argument("--max-depth", type=float, default=2.0,
                    help="deepest patrol expected, m, for the K_s stability check")
     p.add_argument("--neighbour-timeout", type=float, default=1.0,
@@ -407,7 +412,8 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     overrides = {
         "gains": {"k_s": args.k_s, "k_phi": args.k_phi, "cycle_s": args.cycle_s},
-        "patrol": {"passes_per_sweep": args.passes},
+        "patrol": {"passes_per_sweep": args.passes, "sensor_latency_s": args.sensor_latency,
+                   "sensor_band_m": args.sensor_band},
     }
     try:
         gains, patrol, limits = agent_config.load(args.config, overrides)
@@ -417,6 +423,10 @@ def main(argv: list[str] | None = None) -> int:
     if not 0 <= args.id < args.robots:
         print(f"btrack agent: --id {args.id} outside a team of {args.robots}", file=sys.stderr)
         return 2
+    if patrol.sensor_latency_s or patrol.sensor_band_m:
+        print(f"btrack agent {args.id}: ice and algae readings placed back for "
+              f"{patrol.sensor_latency_s:g} s of latency and a {patrol.sensor_band_m:g} m "
+              "dead band", file=sys.stderr, flush=True)
     problems = check_gains(args.robots, gains.k_phi, gains.k_s, args.max_depth)
     if problems:
         print("btrack agent: unstable gains: " + "; ".join(problems), file=sys.stderr)

@@ -384,6 +384,20 @@ def refusal(args: argparse.Namespace, bodies: int) -> str | None:
     return None
 
 
+def _sensor_args(args: argparse.Namespace) -> list[str]:
+    """What the agents are told of their ice and algae sensors: under ``--sensors lab``
+    the profile's latency and dead band (a robot's agent has them from the sensors'
+    data sheet, in its configuration); the ideal sensors have neither."""
+    if args.sensors != "lab":
+        return []
+    from simworld.sensors import profile
+
+    lab = profile("lab")
+    assert lab is not None
+    return ["--sensor-latency", repr(lab.sensor_latency_s), "--sensor-band",
+            repr(lab.dead_band_m)]
+
+
 def _scanners(args: argparse.Namespace) -> int:
     """The world's row of scanners: ``--scanners``, else one per 10 m of the map's edge
     (``simworld.laser.scanner_count``, as the world counts them); the localizer drops a
@@ -488,7 +502,7 @@ def run(args: argparse.Namespace) -> int:
             def agent_args(i: int) -> list[str]:
                 team = args.robots if i < args.robots else bodies
                 return ["agent", "--id", str(i), "--robots", str(team),
-                        *forward_flags(args, AGENT_FLAGS), *member]
+                        *forward_flags(args, AGENT_FLAGS), *_sensor_args(args), *member]
 
             injector = Injector(session, keys, schedule, group, agent_args)
             for i in range(args.robots):

@@ -20,6 +20,10 @@ def test_identity_kept_with_a_person_walking_among_the_robots(tmp_path) -> None:
                   "--map", "half-algae", "--start", "ahead:1", "--duration", str(DURATION_S),
                   "--no-report")
     assert sim.returncode == 0, sim.stderr[-3000:]
+    # the agents are told the profile's sensors, which they place their edges back for
+    for i in range(3):
+        log = (out / "logs" / f"agent{i}.log").read_text()
+        assert "placed back for 0.05 s of latency and a 0.02 m dead band" in log, log[-500:]
     run = load_run(out)
     ids = run.robot_ids
     assert ids == [0, 1, 2]

@@ -577,3 +577,41 @@ def test_samples_that_agree_make_their_bin_one_column():
     assert dm.average(0.2, 0.3) == pytest.approx(1.2)
     assert dm.average(0.15, 0.25) == pytest.approx(1.0)
     assert dm.average(0.4, 0.6) == pytest.approx(1.2)  # beyond the last: its depth
+
+
+def _late_sensor_leg(cfg: PatrolConfig, offset: float) -> float:
+    """One in-leg across the ice edge (y = 0) at 5 cm a tick and across the algae's end
+    (y = 0.9) at 1 cm a tick, read by sensors half a tick late through comparators with
+    a 2 cm dead band (as the lab profile's); the depth the patrol records. ``offset``
+    moves where the ticks fall."""
+    dm = DepthMap(0.0, 0.1, cfg.min_depth_m)
+    patrol = Patrol(cfg, dm, x=0.5)
+    ys = [-0.3 + offset + 0.05 * i for i in range(14)]
+    while ys[-1] < 0.8:
+        ys.append(ys[-1] + 0.05)
+    while ys[-1] < 1.0:
+        ys.append(ys[-1] + 0.01)  # slow over the algae's end
+    ice = algae = False
+    for prev, y in zip([ys[0]] + ys, ys, strict=False):
+        at = 0.5 * (prev + y)  # where the robot was half a tick ago
+        ice = at > 0.01 if not ice else at > -0.01  # switches at +-1 cm
+        inside = min(at, 0.9 - at)
+        algae = inside > 0.01 if not algae else inside > -0.01
+        patrol.step(0.5, y, math.pi / 2, ice, algae and ice, 0.0, 2.0, TeamInput(dt=0.1))
+    assert patrol.last_depth is not None
+    return patrol.last_depth
+
+
+def test_late_sensors_with_a_dead_band_are_placed_back_by_what_the_agent_is_told():
+    """Told nothing, a leg finds the edge 3.5 cm in (fast) and the algae's end 1.5 cm
+    past it (slow): 2 cm short on average over where the ticks fall. Told the latency
+    and the band, right on average, each leg within the ticks' spacing."""
+    told = dataclasses.replace(PatrolConfig(), sensor_latency_s=0.05, sensor_band_m=0.02)
+    offsets = [0.05 * i / 20 for i in range(20)]
+    plain = [_late_sensor_leg(PatrolConfig(), o) - 0.9 for o in offsets]
+    placed = [_late_sensor_leg(told, o) - 0.9 for o in offsets]
+    assert statistics.mean(plain) == pytest.approx(-0.02, abs=0.003)
+    assert statistics.mean(placed) == pytest.approx(0.0, abs=0.002)
+    assert max(map(abs, placed)) <= 0.026  # half a fast tick, and the slow one's half
+    with pytest.raises(ValueError):
+        PatrolConfig(sensor_latency_s=-0.01)
