@@ -49,6 +49,12 @@ class Recovery:
     still_scans: int = 10
     still_m: float = 0.02
     moved_m: float = 0.05
+    # A free blob followed back through those scans (the nearest centre within
+    # follow_m each scan) that moved faster than this is no robot (a Create's top speed
+    # is 0.5 m/s): a person walking through the team, whose legs can look like one, does
+    # not take an occluded robot's track. 0: not checked (the ideal laser: no people).
+    top_speed_m_s: float = 0.0
+    follow_m: float = 0.25
 
 
 def still_blobs(centres: np.ndarray, recent: Sequence[np.ndarray], still_m: float
@@ -67,9 +73,36 @@ def still_blobs(centres: np.ndarray, recent: Sequence[np.ndarray], still_m: floa
     return out
 
 
+def fast_blobs(centres: np.ndarray, recent: Sequence[np.ndarray], follow_m: float,
+               speed_m_s: float, scan_s: float) -> np.ndarray:
+    """For each centre of this scan (the last of ``recent``), whether it can be followed
+    back through every earlier scan of ``recent`` (each time to the nearest centre, if
+    within ``follow_m``) to a place farther than ``speed_m_s`` times the time between.
+    One that cannot be followed (a blob that came into view, a robot set down
+    elsewhere) is not fast."""
+    out = np.zeros(centres.shape[0], dtype=bool)
+    earlier = list(recent)[:-1]
+    if not earlier or centres.shape[0] == 0 or scan_s <= 0:
+        return out
+    for j in range(centres.shape[0]):
+        at = centres[j]
+        for scan in reversed(earlier):
+            if scan.shape[0] == 0:
+                break
+            d = np.hypot(scan[:, 0] - at[0], scan[:, 1] - at[1])
+            k = int(np.argmin(d))
+            if d[k] > follow_m:
+                break
+            at = scan[k]
+        else:
+            out[j] = float(np.hypot(*(centres[j] - at))) > speed_m_s * scan_s * len(earlier)
+    return out
+
+
 def recovery(centres: np.ndarray, used: np.ndarray, predicted: np.ndarray,
              started: np.ndarray, missed: np.ndarray, still: np.ndarray | None,
-             moved: np.ndarray, rules: Recovery) -> list[tuple[int, int]]:
+             moved: np.ndarray, rules: Recovery, fast: np.ndarray | None = None
+             ) -> list[tuple[int, int]]:
     """Which lost robot is re-seeded on which free blob (centres not ``used``), as
     (robot, centre index) pairs.
 
@@ -84,7 +117,7 @@ def recovery(centres: np.ndarray, used: np.ndarray, predicted: np.ndarray,
     whose odometry drove: a blob that stood still is no robot that drove, and one that
     moved is no robot never seeded whose wheels stood (one parked, waiting to join). A
     robot with a pose may take a moving blob though its odometry stood: its wheels may
-    be what failed."""
+    be what failed; but none takes one ``fast`` marks (faster than a robot drives)."""
     lost = np.flatnonzero(~started | (missed >= rules.lost_after))
     free = [j for j in range(centres.shape[0]) if not used[j]]
     if lost.size == 0 or not free:
@@ -94,6 +127,8 @@ def recovery(centres: np.ndarray, used: np.ndarray, predicted: np.ndarray,
         return list(zip(lost.tolist(), order, strict=False))
 
     def fits(robot: int, j: int) -> bool:
+        if fast is not None and fast[j]:
+            return False
         if still is None:
             return True
         if still[j]:

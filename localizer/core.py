@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from agent.phase import wrap_pi_array
-from localizer.associate import Recovery, assign, recovery, still_blobs
+from localizer.associate import Recovery, assign, fast_blobs, recovery, still_blobs
 from localizer.measure import (  # noqa: F401  (the measurement's API, re-exported)
     Blobs,
     ScanGeometry,
@@ -116,16 +116,21 @@ class FilterConfig:
         """The configuration for a real SICK LMS 2xx (``btrack sim --sensors lab``): scans
         median-filtered, a blob's edge returns (mixed pixels) left out of the fit, a tighter
         fit, partial blobs only close to a robot's prediction and never starting a track
-        (a person's leg, a table leg), and each centre moved to the scan's time by the
+        (a person's leg, a table leg), no lost robot re-seeded on a blob moving faster
+        than a Create drives (a person walking), and each centre moved to the scan's time by the
         robot's odometry (the LMS's 75 Hz mirror, two interlaced turns at 0.5 degree:
         Player's sicklms200 documentation)."""
         values: dict[str, object] = dict(blobs=True, median3=True, trim_edges=1,
                                           fit_rms_m=0.012, full_chord_m=0.22,
                                           partial_gate_m=0.06, rotation_s=1.0 / 75.0,
                                           interlace=2, body_radius_m=0.165,
-                                          bumper_radius_m=0.172)
+                                          bumper_radius_m=0.172,
+                                          recovery=Recovery(top_speed_m_s=LAB_TOP_SPEED_M_S))
         values.update(overrides)
         return cls(**values)  # type: ignore[arg-type]
+
+
+LAB_TOP_SPEED_M_S = 0.6  # a Create's top speed (0.5 m/s, the Open Interface's) and a margin
 
 
 @dataclass(frozen=True)
@@ -184,6 +189,7 @@ class Localizer:
         # the last scans' centres and every robot's odometry distance, for still blobs
         self._recent_centres: deque[np.ndarray] = deque(maxlen=self.rules.still_scans)
         self._recent_motion: deque[np.ndarray] = deque(maxlen=self.rules.still_scans)
+        self._scan_s = 0.0  # the time between the last two ticks' scans (odometry's period)
         self.resampled = 0  # resampling events so far (all robots)
         self.reseeded = 0  # recoveries so far
 
@@ -273,8 +279,12 @@ class Localizer:
             if known else None
         moved = (np.sum(self._recent_motion, axis=0) > self.rules.moved_m
                  if self._recent_motion else np.zeros(self.robots, dtype=bool))
+        r = self.rules
+        fast = (fast_blobs(centres, self._recent_centres, r.follow_m, r.top_speed_m_s,
+                           self._scan_s) if r.top_speed_m_s > 0 and self._scan_s > 0
+                else None)
         for robot, j in recovery(centres, used, self.mean_positions(), self.started,
-                                 self.missed, still, moved, self.rules):
+                                 self.missed, still, moved, self.rules, fast):
             self.reseed(robot, centres[j])
 
     # output ----------------------------------------------------------------------
@@ -329,6 +339,7 @@ class Localizer:
         never re-seeds one; an assigned centre is moved from its returns' mean time to
         the scan's along the robot's heading at its odometry's speed."""
         c = self.config
+        self._scan_s = dt
         blobs = merge_blobs([measure_blobs(r, g, c) for r, g in scans], c.radius_m)
         centres = blobs.centres
         gates = np.where(blobs.full, c.gate_m, min(c.partial_gate_m, c.gate_m))

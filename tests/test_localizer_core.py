@@ -263,3 +263,27 @@ def test_an_occluded_robot_does_not_jump_to_a_blob_across_the_scene() -> None:
     assert (errors[:, 0] < 0.05).all()
     assert errors[:, 1].max() < 0.1  # hidden, it stays where it was last seen
     assert errors[-1, 2] < 0.3  # robot 2's filter caught up by re-seeding
+
+
+def test_a_blob_faster_than_a_robot_drives_re_seeds_no_lost_robot() -> None:
+    """A person walking through the team at 0.8 m/s, legs close enough to look like one
+    robot, took an occluded robot's track in the lab suite (5 m off for 8 s). A free
+    blob followed back over the recent scans that moved faster than a Create can is no
+    robot; a slow one is, and one that just came into view cannot be told."""
+    from localizer.associate import Recovery, fast_blobs, recovery
+
+    scans = 10
+    walker = [np.array([[1.0 + 0.08 * k, 0.5], [4.0 + 0.03 * k, 1.0]]) for k in range(scans)]
+    now = np.vstack([walker[-1], [[2.5, 1.5]]])  # and one just come into view
+    recent = [*walker[:-1], now]
+    fast = fast_blobs(now, recent, follow_m=0.25, speed_m_s=0.6, scan_s=0.1)
+    assert fast.tolist() == [True, False, False]
+    assert not fast_blobs(now, recent, 0.25, 0.9, 0.1).any()  # 0.8 m/s is under 0.9
+    rules = Recovery(top_speed_m_s=0.6)
+    started, missed = np.array([True]), np.array([30])
+    predicted = np.array([[1.5, 0.4]])  # nearest the walker: 0.3 m, the others 2 m on
+    used = np.zeros(3, dtype=bool)
+    moved = np.array([False])
+    assert recovery(now, used, predicted, started, missed, None, moved, rules) == [(0, 0)]
+    taken = recovery(now, used, predicted, started, missed, None, moved, rules, fast)
+    assert taken and taken[0][1] != 0
