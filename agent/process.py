@@ -176,6 +176,14 @@ class AgentNode:
         """Subscribe to exactly the state keys membership follows: the neighbours', and
         those of the candidates (ids next to ours whose tokens are not up to us)."""
         wanted = self.membership.followed()
+        if self.bounds is None:
+            # Before the first sensing we do not know if the edge is closed: listen to
+            # the ring's neighbours too (robot 0's lower one is robot n-1), so that on a
+            # ring their states of tick 0, sent as the run begins, are not lost to a
+            # subscription made only when the sensing says so. States wait until then
+            # (parked); on a chain those of a robot that is no neighbour are not kept.
+            wanted = wanted | ({(self.robot - 1) % self.team, (self.robot + 1) % self.team}
+                               - {self.robot})
         if wanted == self.neighbour_subs.keys():
             return
         for rid in set(self.neighbour_subs) - wanted:
@@ -206,9 +214,9 @@ class AgentNode:
                         if msg.closed:
                             self.closed = True
                             self.membership.close_ring()
-                            self._follow_neighbours()
                             self._take_contour()
                         self.bounds = self._bounds(msg)
+                        self._follow_neighbours()
                     self._unpark(every=first)
                 if msg.pose:  # the robot's pose came with its sensing
                     x, y, theta = msg.pose

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -117,6 +118,17 @@ def wait_for(cond: Callable[[], bool], timeout: float, what: str) -> None:
         time.sleep(0.02)
 
 
+def wait_port(port: int, timeout_s: float = 60.0) -> None:
+    """Wait until something listens on loopback ``port`` (a run's router)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        with socket.socket() as s:
+            if s.connect_ex(("127.0.0.1", port)) == 0:
+                return
+        time.sleep(0.05)
+    raise AssertionError(f"nothing listens on {port}")
+
+
 def wait_for_world(run_dir: Path, launcher: subprocess.Popen[str], timeout_s: float = 60
                    ) -> dict[str, int]:
     """The pids a launcher recorded in RUN_DIR/logs/pids.json, once its world is started;
@@ -132,4 +144,5 @@ def wait_for_world(run_dir: Path, launcher: subprocess.Popen[str], timeout_s: fl
 
 
 __all__ = ["end", "end_children_of_run", "free_port", "hub_session", "kill_pid", "member_args",
-           "pid_alive", "run_sim", "start", "unique_ns", "wait_for", "wait_for_world"]
+           "pid_alive", "run_sim", "start", "unique_ns", "wait_for", "wait_for_world",
+           "wait_port"]

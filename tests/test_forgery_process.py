@@ -8,30 +8,18 @@ neighbours off their segments and slowed the lockstep to a tick a second."""
 from __future__ import annotations
 
 import json
-import socket
 import subprocess
 import sys
-import time
 
 import pytest
 
 from deploy.procs import free_port
 from report.load import load_run
 from report.summary import compute_summary
-from tests.procutil import end, end_children_of_run, run_sim, unique_ns
+from tests.procutil import end, end_children_of_run, run_sim, unique_ns, wait_port
 
 DURATION = ["--localization", "truth", "--duration", "40", "--seed", "3", "--robots", "3"]
 LIE_AT = 150  # the world's tick the forger lies at
-
-
-def _wait_port(port: int, timeout_s: float = 60.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        with socket.socket() as s:
-            if s.connect_ex(("127.0.0.1", port)) == 0:
-                return
-        time.sleep(0.05)
-    raise AssertionError(f"nothing listens on {port}")
 
 
 @pytest.fixture(scope="module")
@@ -46,7 +34,7 @@ def runs(tmp_path_factory):
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     forger = None
     try:
-        _wait_port(port)
+        wait_port(port)
         forger = subprocess.Popen(
             [sys.executable, "-m", "tests.forger", "--ns", ns, "--connect",
              f"tcp/127.0.0.1:{port}", "--at", str(LIE_AT)],
