@@ -313,7 +313,7 @@ def ring_report(run_dir: Path, run: Any) -> dict[str, Any]:
         ring_tracks,
     )
     from report.series import time_grid
-    from report.summary import recording_completeness
+    from report.summary import recording_completeness, rejected_messages
 
     info = run.info
     edge = contour_edge(info["contour"])
@@ -335,9 +335,7 @@ def ring_report(run_dir: Path, run: Any) -> dict[str, Any]:
         "ticks": int(run.tick_t.size),
         **recording_completeness(run),
         "invalid_messages": int(run.invalid),
-        "rejected_messages": (sum(run.rejected.values())
-                              + sum(run.refused.get("agents_rejected", {}).values())
-                              + int(run.refused.get("world_rejected", 0))),
+        "rejected_messages": rejected_messages(run),
         "refused": run.refused,
         "positions_from": run.positions_from,
         # every robot's arc [lo, hi] in its own frame at the run's last tick

@@ -8,42 +8,18 @@ world's grown by 1 %. It prints "lied" and waits to be ended."""
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import threading
 
-from wire import AgentState, Keys, Tick, WorldInfo, decode, encode
-from wire.session import SessionOptions, open_session
+from tests.forger import forger_args, hear_until
+from wire import AgentState, Tick, WorldInfo, encode
+from wire.session import open_session
 
 
 def main() -> None:
-    p = argparse.ArgumentParser()
-    p.add_argument("--ns", required=True)
-    p.add_argument("--connect", required=True)
-    p.add_argument("--at", type=int, required=True, help="the world's tick to lie at")
-    args = p.parse_args()
-    keys = Keys(args.ns)
-    opts = SessionOptions(ns=args.ns, mode="client", connect=(args.connect,), multicast=False)
+    args, keys, opts = forger_args()
     with open_session(opts) as session:
-        now = threading.Event()
-        heard: dict[str, object] = {}
-
-        def on_tick(sample) -> None:  # noqa: ANN001
-            tick = decode(Tick, sample.payload.to_bytes())
-            if tick.k >= args.at and "info" in heard and not now.is_set():
-                heard["tick"] = tick
-                now.set()
-
-        def on_state(sample) -> None:  # noqa: ANN001
-            heard["state"] = decode(AgentState, sample.payload.to_bytes())
-
-        def on_info(sample) -> None:  # noqa: ANN001
-            heard["info"] = decode(WorldInfo, sample.payload.to_bytes())
-
-        subs = [session.declare_subscriber(keys.world_tick(), on_tick),
-                session.declare_subscriber(keys.state(1), on_state),
-                session.declare_subscriber(keys.world_info(), on_info)]
-        now.wait()
+        heard, subs = hear_until(session, keys, args.at, info=True)
         tick, real, info = heard["tick"], heard["state"], heard["info"]
         assert isinstance(tick, Tick) and isinstance(real, AgentState)
         assert isinstance(info, WorldInfo) and info.closed

@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -17,11 +15,10 @@ import pytest
 
 from deploy.engine import EngineCase, measures
 from deploy.engine import run as run_case
-from deploy.procs import free_port
 from report.load import load_run
 from report.ring import RingEdge, ring_edge_of, ring_errors, ring_tracks
 from report.ring import contour_edge as edge_of
-from tests.procutil import end, end_children_of_run, run_sim, unique_ns, wait_port
+from tests.procutil import run_attacked, run_sim
 
 FLOE = "floe:1,shape=round,size=2.5,algae=blooms"  # 15.7 m of edge, balanced in 200 s
 CASE = ["--map", FLOE, "--robots", "3", "--localization", "truth", "--seed", "1"]
@@ -109,27 +106,10 @@ def test_the_bus_and_the_in_process_engine_agree_bit_for_bit(ring: Path) -> None
 
 
 def test_a_forged_ring_state_is_refused_and_changes_nothing(tmp_path: Path) -> None:
-    ns, port, out = unique_ns(), free_port(), tmp_path / "attacked"
-    sim = subprocess.Popen(
-        [sys.executable, "-m", "btrack", "sim", "--out", str(out), "--quiet", *CASE,
-         "--duration", "40", "--ns", ns, "--port", str(port), "--no-scene"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
-    forger = None
-    try:
-        wait_port(port)
-        forger = subprocess.Popen(
-            [sys.executable, "-m", "tests.ring_forger", "--ns", ns, "--connect",
-             f"tcp/127.0.0.1:{port}", "--at", "150"],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
-        _, stderr = sim.communicate(timeout=300)
-        assert sim.returncode == 0, stderr[-3000:]
-        assert forger.poll() is None, forger.communicate()[1]  # it lied and waits
-    finally:
-        end(sim)  # type: ignore[arg-type]
-        end_children_of_run(out)
-        if forger is not None:
-            end(forger)  # type: ignore[arg-type]
-    assert forger.stdout is not None and forger.stdout.readline().strip() == "lied"
+    out = tmp_path / "attacked"
+    sim, lied = run_attacked(out, [*CASE, "--duration", "40"], "tests.ring_forger", 150)
+    assert sim.returncode == 0, sim.stderr[-3000:]
+    assert lied.strip() == "lied"
     summary = json.loads((out / "summary.json").read_text())
     refused = summary["refused"]
     # robot 2 (robot 1's upper neighbour) refuses the boundary half a turn on; both
