@@ -1,8 +1,7 @@
 """A process that lies on a ring's bus (issue 18), for the tests: well-formed messages
 that cannot be true of a ring round a closed edge. ``python -m tests.ring_forger --ns NS
 --connect EP --at K`` waits for the world's tick K, then, as robot 1 of the ring, sends
-states of the next ticks: its arc a whole turn on (plausible, but a second state of its
-tick that moves its boundaries a turn), its upper boundary half a turn on, a bin of its
+states of the next ticks: its arc with both ends a quarter of a turn out, a bin of its
 ends across the ring and an open edge's state; and a WorldInfo whose contour is the
 world's grown by 1 %. It prints "lied" and waits to be ended."""
 
@@ -30,12 +29,14 @@ def main() -> None:
             forged = dataclasses.replace(real, k=k + j, t=(k + j) * 0.1, **fields)
             put(keys.state(1), encode(forged))
 
-        lie(2, lo=real.lo + length, hi=real.hi + length)
-        hi = real.hi + 0.5 * length
-        lie(3, hi=hi, workload=real.depth_avg * (hi - real.lo))
+        # both ends a quarter of a turn out: beyond the law's reach for both neighbours
+        # (a lie only one of them could check would be a second plausible state of its
+        # tick to the other, which may act on it before the real one comes)
+        lo, hi = real.lo - 0.25 * length, real.hi + 0.25 * length
+        lie(2, lo=lo, hi=hi, workload=real.depth_avg * (hi - lo))
         across = 0.5 * (real.lo + real.hi) + 0.5 * length  # the far side of the ring
-        lie(4, end_bins=[int(across / 0.1)], end_depths=[0.5])
-        lie(5, closed=False, lo=0.0, hi=min(real.hi - real.lo, 0.9 * length),
+        lie(3, end_bins=[int(across / 0.1)], end_depths=[0.5])
+        lie(4, closed=False, lo=0.0, hi=min(real.hi - real.lo, 0.9 * length),
             workload=real.depth_avg * min(real.hi - real.lo, 0.9 * length))
         put(keys.world_info(), encode(dataclasses.replace(
             info, contour=[1.01 * v for v in info.contour])))

@@ -112,16 +112,19 @@ def test_a_forged_ring_state_is_refused_and_changes_nothing(tmp_path: Path) -> N
     assert lied.strip() == "lied"
     summary = json.loads((out / "summary.json").read_text())
     refused = summary["refused"]
-    # robot 2 (robot 1's upper neighbour) refuses the boundary half a turn on; both
-    # neighbours the far bin and the open edge's state; of the whole turn (plausible) each
-    # keeps the state nearer the one before; every agent and the recorder the contour
-    assert refused["agents_rejected"]["2"] >= 4 and refused["agents_rejected"]["0"] >= 3
-    assert refused["agents_rejected"]["1"] >= 1
-    assert refused["recorder_rejected"].get("world/info", 0) == 1
+    # both neighbours refuse the arc a quarter of a turn out at both ends, the bin across
+    # the ring and the open edge's state; every agent and the recorder the second contour
+    assert refused["agents_rejected"] == {"0": 4, "1": 1, "2": 4}
+    assert refused["recorder_rejected"] == {"world/info": 1, "agent/1/state": 1}
+    # the lies changed nothing: the clean run, bit for bit (unless a loaded machine made
+    # the world step without a command, past --cmd-timeout: then the runs differ by timing)
+    world = json.loads((out / "logs" / "world.out").read_text().strip().splitlines()[-1])
+    if world["timeouts"]:
+        return
     run = load_run(out)
     gmap, tracks = run_case(EngineCase(map=FLOE, robots=3, start="ahead:1",
                                        duration_s=40.0, seed=1, localization="truth"))
-    for i in range(3):  # the lies changed nothing: the clean run, bit for bit
+    for i in range(3):
         assert np.array_equal(run.truth[i].x, tracks.x[i]), i
         assert np.array_equal(run.states[i].lo, tracks.lo[i]), i
         assert np.array_equal(run.states[i].hi, tracks.hi[i]), i
