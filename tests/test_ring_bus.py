@@ -13,11 +13,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from deploy.engine import EngineCase, measures
+from deploy.engine import EngineCase, Tracks, measures
 from deploy.engine import run as run_case
 from report.load import load_run
 from report.ring import RingEdge, ring_edge_of, ring_errors, ring_tracks
 from report.ring import contour_edge as edge_of
+from simworld.maps import GridMap
 from tests.procutil import run_attacked, run_sim
 
 FLOE = "floe:1,shape=round,size=2.5,algae=blooms"  # 15.7 m of edge, balanced in 200 s
@@ -88,17 +89,24 @@ def test_the_ring_balances_over_the_bus(ring: Path) -> None:
     assert summary["workload_rel_sse"] < 0.02 and summary["phase_sse_rad"] < 0.1
 
 
-def test_the_bus_and_the_in_process_engine_agree_bit_for_bit(ring: Path) -> None:
-    run = load_run(ring)
+def engine_agrees(run_dir: Path, duration_s: float) -> tuple[GridMap, Tracks]:
+    """Assert that the recorded run is the in-process engine's of the same case, every
+    robot's true track and published state bit for bit; the engine's map and tracks."""
+    run = load_run(run_dir)
     gmap, tracks = run_case(EngineCase(map=FLOE, robots=3, start="ahead:1",
-                                       duration_s=200.0, seed=1, localization="truth"))
+                                       duration_s=duration_s, seed=1, localization="truth"))
     for i in range(3):
-        assert np.array_equal(run.truth[i].x, tracks.x[i]), i
-        assert np.array_equal(run.truth[i].y, tracks.y[i]), i
-        assert np.array_equal(run.states[i].lo, tracks.lo[i]), i
-        assert np.array_equal(run.states[i].hi, tracks.hi[i]), i
-        assert np.array_equal(run.states[i].phase, tracks.phase[i]), i
-        assert np.array_equal(run.states[i].workload, tracks.workload[i]), i
+        for ours, theirs in ((run.truth[i].x, tracks.x[i]), (run.truth[i].y, tracks.y[i]),
+                             (run.states[i].lo, tracks.lo[i]),
+                             (run.states[i].hi, tracks.hi[i]),
+                             (run.states[i].phase, tracks.phase[i]),
+                             (run.states[i].workload, tracks.workload[i])):
+            assert np.array_equal(ours, theirs), i
+    return gmap, tracks
+
+
+def test_the_bus_and_the_in_process_engine_agree_bit_for_bit(ring: Path) -> None:
+    gmap, tracks = engine_agrees(ring, 200.0)
     summary = json.loads((ring / "summary.json").read_text())
     engine = measures(gmap, tracks)
     for key in RING_MEASURES:  # the report's ring measures from the recording alone
@@ -121,10 +129,4 @@ def test_a_forged_ring_state_is_refused_and_changes_nothing(tmp_path: Path) -> N
     world = json.loads((out / "logs" / "world.out").read_text().strip().splitlines()[-1])
     if world["timeouts"]:
         return
-    run = load_run(out)
-    gmap, tracks = run_case(EngineCase(map=FLOE, robots=3, start="ahead:1",
-                                       duration_s=40.0, seed=1, localization="truth"))
-    for i in range(3):
-        assert np.array_equal(run.truth[i].x, tracks.x[i]), i
-        assert np.array_equal(run.states[i].lo, tracks.lo[i]), i
-        assert np.array_equal(run.states[i].hi, tracks.hi[i]), i
+    engine_agrees(out, 40.0)
