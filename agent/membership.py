@@ -21,6 +21,12 @@ tick of the law can move a boundary: rightly, the claim was made from the wrong 
 and waited a second for each, so the whole lockstep crept at a tick a second. So each
 agent also listens for the states of the ids nearest it in the gap to its neighbour on
 each side (``candidates``), and takes one for live once a state of it comes.
+
+On a ring (a closed edge, ``ring=True``) the ids wrap: the neighbours are the nearest
+live ids below and above round the ring (agent.ring.ring_neighbours: robot 0's lower one
+is the highest live id), both always exist while anyone else is live, the candidates
+are counted round the ring too, and the first arcs are equal arcs of the ring from
+s = 0. The chain's answers are unchanged.
 """
 
 from __future__ import annotations
@@ -30,6 +36,7 @@ from typing import Generic, Protocol, TypeVar
 
 from agent.controller import initial_segment
 from agent.partition import SegmentView, join_segment
+from agent.ring import initial_arc, ring_neighbours
 
 HISTORY = 8  # neighbour states kept per neighbour, by tick
 # Ids listened to on each side, nearest first, in the gap to the neighbour on that side
@@ -96,11 +103,12 @@ class Membership(Generic[S]):
     running team has an id past the size the others were started with)."""
 
     def __init__(self, robot: int, team: int, neighbour_timeout_s: float = 1.0,
-                 join_wait_s: float = JOIN_WAIT_S):
+                 join_wait_s: float = JOIN_WAIT_S, ring: bool = False):
         if not 0 <= robot < team:
             raise ValueError(f"robot id {robot} outside a team of {team}")
         self.robot = robot
         self.team = team
+        self.ring = ring
         self.neighbour_timeout_s = neighbour_timeout_s
         self.join_wait_s = join_wait_s
         self._live: set[int] = set()
@@ -135,6 +143,15 @@ class Membership(Generic[S]):
             self._silent[robot] = self._last_k + GONE_TICKS
         self._proven.discard(robot)
         self._refollow()
+
+    def close_ring(self) -> None:
+        """The edge turned out closed (the first sensing says so): the team is a ring.
+        Only before the first tick, while nothing has been decided on the chain's rules."""
+        if self._last_k >= 0:
+            raise ValueError("a team becomes a ring only before its first tick")
+        if not self.ring:
+            self.ring = True
+            self._refollow()
 
     def _refollow(self) -> None:
         """After the live set changed: a robot that stops being a neighbour is forgotten
@@ -266,6 +283,10 @@ class Membership(Generic[S]):
         """The nearest live lower and higher ids (None at an end of the chain), live by
         token or by its states (``proven``)."""
         live = self._live | self._proven
+        if self.ring:
+            if not live - {self.robot}:
+                return None, None
+            return ring_neighbours(self.robot, sorted(live | {self.robot}))
         lower = max((r for r in live if r < self.robot), default=None)
         upper = min((r for r in live if r > self.robot), default=None)
         return lower, upper
@@ -275,11 +296,16 @@ class Membership(Generic[S]):
         ``CANDIDATES_PER_SIDE`` nearest ids between us and the neighbour there (the end
         of the team as started, without one); their tokens are not up to us."""
         lower, upper = self.neighbours()
-        below = range(self.robot - 1, -1 if lower is None else lower, -1)
-        above = range(self.robot + 1, self.team if upper is None else upper)
+        if self.ring:  # round the ring, up to the neighbour on each side
+            below = [(self.robot - j) % self.team for j in range(1, self.team)]
+            above = [(self.robot + j) % self.team for j in range(1, self.team)]
+        else:
+            below = list(range(self.robot - 1, -1 if lower is None else lower, -1))
+            above = list(range(self.robot + 1, self.team if upper is None else upper))
         out: set[int] = set()
-        for ids in (below, above):
-            out.update(list(ids)[:CANDIDATES_PER_SIDE])
+        for ids, stop in ((below, lower), (above, upper)):
+            gap = ids if stop is None or stop not in ids else ids[:ids.index(stop)]
+            out.update(gap[:CANDIDATES_PER_SIDE])
         return frozenset(out)
 
     def followed(self) -> frozenset[int]:
@@ -307,6 +333,11 @@ class Membership(Generic[S]):
         neighbour not heard yet."""
         lower_id, upper_id = self.neighbours()
         views = [self.latest_segment(rid, k) for rid in (lower_id, upper_id)]
+        if self.ring and (k == 0 or all(v is None for v in views)):
+            lo, hi = initial_arc(self.robot, self.team, edge_hi - edge_lo)
+            return edge_lo + lo, edge_lo + hi
+        if self.ring:
+            raise NotImplementedError("joining a running ring is not built yet")
         if k == 0 or all(v is None for v in views):
             return initial_segment(self.robot, self.team, edge_lo, edge_hi)
         return join_segment(views[0], views[1], edge_lo, edge_hi,
@@ -358,5 +389,9 @@ class Membership(Generic[S]):
         starts once it sees every token; each agent may see its neighbours' a little
         later, and one that had not would treat them as newcomers it need not wait for,
         and the run would depend on timing."""
-        expected = {r for r in (self.robot - 1, self.robot + 1) if 0 <= r < self.team}
+        if self.ring:
+            expected = {(self.robot - 1) % self.team, (self.robot + 1) % self.team} - {
+                self.robot}
+        else:
+            expected = {r for r in (self.robot - 1, self.robot + 1) if 0 <= r < self.team}
         return expected <= self._live | self._proven

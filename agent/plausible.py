@@ -13,6 +13,12 @@ a run (issue 19). Two layers, both pure:
   workload law (eq. 4.3, ``shared_boundary``) can put it in one tick, never past the
   middle of the listener's own segment.
 
+On a ring (a closed edge) the sender's arc and bins are in its own frame of s, which
+differs from the listener's by whole turns (agent.ring): a wrap by whole turns is no
+jump. Its bins must lie near its arc (there is no end of the edge to fall off), and the
+shared boundary is judged in the listener's frame, the sender's values moved into it
+by the whole turns their two views of that boundary tell (``frame_shift``).
+
 The sweep count (``turns``) is not judged: it jumps, rightly, whenever a robot's lower
 neighbour changes (it takes the new one's count), and that jump runs up the chain.
 
@@ -24,9 +30,10 @@ as for a late state (so a refused copy cannot make it act without the real one).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from agent.partition import SegmentView, boundary_reach
+from agent.ring import frame_shift
 from wire.messages import AgentState
 
 MAX_AHEAD_TICKS = 10  # a neighbour's state this many ticks past our newest sensing, at most
@@ -52,10 +59,20 @@ class Bounds:
     depth_max: float
     bin_m: float
     max_passes: int
+    # A closed edge (a ring of length edge_hi - edge_lo): a sender's bins must lie within
+    # ``reach_m`` (or ``reach_fraction`` of its arc, if more) of its arc, as the bins it
+    # tells of do (agent.controller: ``shared_reach_m``, ``shared_reach_fraction``).
+    closed: bool = False
+    reach_m: float = 0.0
+    reach_fraction: float = 0.0
 
     @property
     def bins(self) -> int:
         return edge_bins(self.edge_lo, self.edge_hi, self.bin_m)
+
+    @property
+    def length(self) -> float:
+        return self.edge_hi - self.edge_lo
 
 
 @dataclass(frozen=True)
@@ -85,7 +102,17 @@ def state_problem(s: AgentState, bounds: Bounds, newest_k: int | None,
         return f"mean depth {s.depth_avg:g} m is deeper than any patrol ({bounds.depth_max:g} m)"
     if any(d > bounds.depth_max for d in s.end_depths):
         return f"a depth of its ends is deeper than any patrol ({bounds.depth_max:g} m)"
-    if any(not 0 <= b < bounds.bins for b in s.end_bins):
+    if s.closed != bounds.closed:
+        return "a closed edge's state on an open one" if s.closed else (
+            "an open edge's state on a closed one")
+    if bounds.closed:
+        span = s.hi - s.lo
+        reach = max(bounds.reach_m, bounds.reach_fraction * span) + bounds.bin_m
+        if any(not s.lo - reach <= (b + 0.5) * bounds.bin_m <= s.hi + reach
+               for b in s.end_bins):
+            return (f"a bin of its ends is more than {reach:.3g} m from its arc "
+                    f"[{s.lo:.6g}, {s.hi:.6g}]")
+    elif any(not 0 <= b < bounds.bins for b in s.end_bins):
         return f"a bin of its ends is off the edge's {bounds.bins} bins"
     span = s.hi - s.lo
     if abs(s.workload - s.depth_avg * span) > 1e-6 * max(1.0, s.workload):
@@ -96,8 +123,21 @@ def state_problem(s: AgentState, bounds: Bounds, newest_k: int | None,
     return None
 
 
+def on_ring(s: AgentState, side: str, claim: Claim, length: float) -> AgentState:
+    """A ring neighbour's state moved into the listener's frame by the whole turns that
+    put the boundary the two share (its hi for a lower neighbour, its lo for an upper
+    one) nearest the listener's view of it in ``claim``."""
+    lower = side == "lower"
+    shift = frame_shift(s.hi if lower else s.lo, claim.lo if lower else claim.hi, length)
+    if shift == 0.0:
+        return s
+    return replace(s, lo=s.lo + shift, hi=s.hi + shift, edge_lo=s.edge_lo + shift,
+                   edge_hi=s.edge_hi + shift)
+
+
 def neighbour_problem(s: AgentState, me: int, side: str, mine: dict[int, Claim],
-                      theirs_before: AgentState | None, min_segment_m: float) -> str | None:
+                      theirs_before: AgentState | None, min_segment_m: float,
+                      ring_length: float | None = None) -> str | None:
     """The rules only a neighbour checks. ``me``: the listener's id; ``side``: "lower" if
     the sender is the listener's lower neighbour, "upper" if its upper one; ``mine``:
     the listener's own recent claims by tick; ``theirs_before``: the sender's latest
@@ -112,10 +152,19 @@ def neighbour_problem(s: AgentState, me: int, side: str, mine: dict[int, Claim],
     freeze, and that it keeps until it hears the listener: the two then meet in the
     middle), and no other point past the middle of the listener's latest segment (a
     quarter further for a robot just joining, which split from a slightly older one of
-    ours)."""
+    ours).
+
+    On a ring (``ring_length``, the closed edge's length) both states of the sender are
+    first moved into the listener's frame (``on_ring``), and there is no edge's end to
+    claim."""
     ks = [k for k in mine if k <= s.k - 1]
     if not ks:
         return None
+    if ring_length is not None:
+        latest = mine[max(ks)]
+        s = on_ring(s, side, latest, ring_length)
+        if theirs_before is not None:
+            theirs_before = on_ring(theirs_before, side, latest, ring_length)
     lower = side == "lower"
     shared = s.hi if lower else s.lo
     names_me = (s.upper if lower else s.lower) == me
@@ -135,7 +184,7 @@ def neighbour_problem(s: AgentState, me: int, side: str, mine: dict[int, Claim],
         return (f"the boundary it shares with us is at {shared:.6g} m; from its state of "
                 f"tick {s.k - 1} and ours the law can put it only in [{low:.6g}, {high:.6g}] m")
     edge_end = s.edge_hi if lower else s.edge_lo
-    if abs(shared - edge_end) <= TOL_M:
+    if ring_length is None and abs(shared - edge_end) <= TOL_M:
         # the edge's end: the law's claim of a robot that saw nobody on our side (it lost
         # sight of us, after a freeze), kept until it hears us; the two then meet in the
         # middle. Refusing it left both claiming the whole edge, each refusing the other.

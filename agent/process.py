@@ -6,6 +6,12 @@ the membership core (agent.membership), which decides whether each tick acts, wa
 or stands still, runs the control core and publishes its state and its robot's
 command. Malformed messages
 are counted and dropped; nothing on the bus can kill it.
+
+On a closed edge (its Sense says so) the team is a ring: the agent waits for the
+world's WorldInfo with the edge's contour, builds its edge frame from it and runs a
+``RingController`` (agent.ringcontrol), its neighbours the nearest live ids round the
+ring; the first contour whose length is the Sense's edge is taken, an unlike one later
+refused.
 """
 
 from __future__ import annotations
@@ -27,10 +33,13 @@ import zenoh
 from agent import config as agent_config
 from agent import plausible
 from agent.controller import Controller, Neighbour
+from agent.edgeframe import ClosedEdge
 from agent.membership import HISTORY, Decision, Membership
+from agent.ring import ring_bins
+from agent.ringcontrol import RingController
 from agent.stability import check_gains
 from agent.team import passes_for
-from wire import AgentState, Cmd, DecodeError, Keys, Pose, Sense, decode, encode
+from wire import AgentState, Cmd, DecodeError, Keys, Pose, Sense, WorldInfo, decode, encode
 from wire.session import add_session_args, declare_publisher, open_session, options_from_args
 
 DEFAULT_LEASE_S = 1.0  # lease an agent announces unless told otherwise
@@ -69,14 +78,21 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+class RingGainsError(ValueError):
+    """Gains that are stable on the team's chain but not on its ring."""
+
+
 class AgentNode:
     """The shell around one Controller and its Membership: subscriptions, the tick loop."""
 
     def __init__(self, session: zenoh.Session, keys: Keys, robot: int, team: int,
-                 gains: Any, patrol: Any, limits: Any, neighbour_timeout: float):
+                 gains: Any, patrol: Any, limits: Any, neighbour_timeout: float,
+                 max_depth_m: float = 2.0):
         self.session = session
         self.keys = keys
         self.robot = robot
+        self.team = team
+        self.max_depth_m = max_depth_m
         self.gains, self.patrol_cfg, self.limits = gains, patrol, limits
         self.membership: Membership[AgentState] = Membership(robot, team, neighbour_timeout)
         # Every message in arrival order; a token in ``wake`` for each wake-up wanted.
@@ -102,12 +118,18 @@ class AgentNode:
         self.claims: dict[int, plausible.Claim] = {}
         self.parked: dict[tuple[int, int], list[tuple[str, AgentState]]] = {}
         self.controller: Controller | None = None
+        # A closed edge: whether the sensing says so, and the edge frame built from the
+        # world's contour (None until a WorldInfo with one has come; ticks wait for it)
+        self.closed = False
+        self.contour: list[float] | None = None
+        self.ring_edge: ClosedEdge | None = None
         self.stopping = False
         self.pub_state = declare_publisher(session, keys.state(robot))
         self.pub_cmd = declare_publisher(session, keys.cmd(robot))
         self.subs = [
             session.declare_subscriber(keys.sense(robot), self._on("sense")),
             session.declare_subscriber(keys.pose(robot), self._on("pose")),
+            session.declare_subscriber(keys.world_info(), self._on("info")),
             session.liveliness().declare_subscriber(
                 keys.alive("*"), self._on_alive, history=True
             ),
@@ -159,6 +181,14 @@ class AgentNode:
         """Subscribe to exactly the state keys membership follows: the neighbours', and
         those of the candidates (ids next to ours whose tokens are not up to us)."""
         wanted = self.membership.followed()
+        if self.bounds is None:
+            # Before the first sensing we do not know if the edge is closed: listen to
+            # the ring's neighbours too (robot 0's lower one is robot n-1), so that on a
+            # ring their states of tick 0, sent as the run begins, are not lost to a
+            # subscription made only when the sensing says so. States wait until then
+            # (parked); on a chain those of a robot that is no neighbour are not kept.
+            wanted = wanted | ({(self.robot - 1) % self.team, (self.robot + 1) % self.team}
+                               - {self.robot})
         if wanted == self.neighbour_subs.keys():
             return
         for rid in set(self.neighbour_subs) - wanted:
@@ -186,7 +216,12 @@ class AgentNode:
                     self.newest_k = msg.k
                     first = self.bounds is None
                     if first:  # now states can be judged: every one parked so far is
+                        if msg.closed:
+                            self.closed = True
+                            self.membership.close_ring()
+                            self._take_contour()
                         self.bounds = self._bounds(msg)
+                        self._follow_neighbours()
                     self._unpark(every=first)
                 if msg.pose:  # the robot's pose came with its sensing
                     x, y, theta = msg.pose
@@ -199,6 +234,8 @@ class AgentNode:
                     raise DecodeError(f"pose for robot {pose.robot}")
                 self.poses[pose.k] = pose
                 self._prune(self.poses)
+            elif kind == "info":
+                self._info(key, decode(WorldInfo, payload))
             elif kind == "state":
                 state = decode(AgentState, payload)
                 if Keys.robot_of(key) != state.robot:
@@ -206,6 +243,40 @@ class AgentNode:
                 self._judge(key, state)
         except DecodeError as exc:
             self._drop(key, str(exc))
+
+    def _info(self, key: str, info: WorldInfo) -> None:
+        """The world's WorldInfo: on a closed edge, its contour is our edge frame (the
+        first one that fits our sensing's edge; an unlike one after it is refused)."""
+        if not info.closed:
+            return
+        if self.contour is None:
+            self.contour = list(info.contour)
+            self._take_contour()
+        elif info.contour != self.contour:
+            self._reject(key, "a second world with another contour")
+
+    def _take_contour(self) -> None:
+        """Build the edge frame from the contour heard, once the sensing has said the
+        edge is closed and how long it is; a contour that does not fit is dropped."""
+        if self.ring_edge is not None or self.contour is None or not self.senses:
+            return
+        sense = self.senses[max(self.senses)]
+        if not self.closed:
+            return
+        c = self.contour
+        try:
+            edge = ClosedEdge(list(zip(c[0::2], c[1::2], strict=True)))
+        except ValueError as exc:
+            self.contour = None
+            self._reject(self.keys.world_info(), f"a contour that is no closed edge: {exc}")
+            return
+        length = sense.edge_hi - sense.edge_lo
+        if abs(edge.length - length) > 1e-6 * max(1.0, length):
+            self.contour = None
+            self._reject(self.keys.world_info(), f"a contour {edge.length:.6g} m long; our "
+                         f"edge is {length:.6g} m")
+            return
+        self.ring_edge = edge
 
     def _judge(self, key: str, state: AgentState) -> None:
         """A neighbour's well-formed state: kept if plausible (agent.plausible), else
@@ -236,8 +307,9 @@ class AgentNode:
         side = "lower" if state.robot == lower else "upper" if state.robot == upper else None
         if side is not None:
             before = self.membership.latest(state.robot, state.k - 1)
-            why = plausible.neighbour_problem(state, self.robot, side, self.claims, before,
-                                              self.gains.min_segment_m)
+            why = plausible.neighbour_problem(
+                state, self.robot, side, self.claims, before, self.gains.min_segment_m,
+                self.bounds.length if self.bounds is not None and self.closed else None)
             if why is not None:
                 self._reject(key, why)
                 return
@@ -282,6 +354,14 @@ class AgentNode:
     def _bounds(self, sense: Sense) -> plausible.Bounds:
         p = self.patrol_cfg
         edge = sense.edge_hi - sense.edge_lo
+        if sense.closed:  # a ring's depth map: a whole number of bins make the ring
+            return plausible.Bounds(
+                sense.edge_lo, sense.edge_hi,
+                depth_max=p.max_depth_m + p.margin_out_m + p.max_search_m,
+                bin_m=ring_bins(edge, p.bin_m),
+                max_passes=passes_for(edge, p.max_spacing_m, p.passes_per_sweep),
+                closed=True, reach_m=self.gains.shared_reach_m,
+                reach_fraction=self.gains.shared_reach_fraction)
         return plausible.Bounds(
             sense.edge_lo, sense.edge_hi,
             depth_max=p.max_depth_m + p.margin_out_m + p.max_search_m, bin_m=p.bin_m,
@@ -303,6 +383,8 @@ class AgentNode:
 
     def _ready_tick(self) -> int | None:
         """The newest tick after the last one done with both its Sense and its Pose."""
+        if self.closed and self.ring_edge is None:
+            return None  # the contour has not come yet
         ready = [k for k in self.senses if k > self.membership.last_k and k in self.poses]
         if not ready:
             return None
@@ -368,10 +450,19 @@ class AgentNode:
         assert sense is not None and pose is not None
         if self.controller is None:
             lo, hi = self.membership.first_segment(k, sense.edge_lo, sense.edge_hi)
-            self.controller = Controller(
-                self.robot, lo, hi, sense.edge_lo, sense.edge_hi, pose.x,
-                self.gains, self.patrol_cfg, self.limits,
-            )
+            if self.ring_edge is not None:
+                g = self.gains
+                problems = check_gains(self.team, g.k_phi, g.k_s, self.max_depth_m, closed=True)
+                if problems:
+                    raise RingGainsError("; ".join(problems))
+                self.controller = RingController(
+                    self.robot, self.team, self.ring_edge, lo, hi, pose.x, pose.y,
+                    self.gains, self.patrol_cfg, self.limits, self.max_depth_m)
+            else:
+                self.controller = Controller(
+                    self.robot, lo, hi, sense.edge_lo, sense.edge_hi, pose.x,
+                    self.gains, self.patrol_cfg, self.limits,
+                )
         lower_id, upper_id = self.membership.neighbours()
         out = self.controller.step(
             sense.dt, pose.x, pose.y, pose.theta, sense.ice, sense.algae,
@@ -391,6 +482,7 @@ class AgentNode:
             end_depths=[d for _, d in out.end_depths],
             cycle_s=me.cycle_s, passes=me.passes, need_below=me.need_below,
             need_above=me.need_above, span_below=me.span_below, span_above=me.span_above,
+            closed=self.closed,
         )
         # The state before the command: the world cannot step (and start tick k+1) until
         # every command is in, so each neighbour's state of tick k is always out before
@@ -437,12 +529,15 @@ def main(argv: list[str] | None = None) -> int:
         opts = dataclasses.replace(opts, lease_s=DEFAULT_LEASE_S)
     with open_session(opts) as session:
         node = AgentNode(session, Keys(opts.ns), args.id, args.robots, gains, patrol, limits,
-                         args.neighbour_timeout)
+                         args.neighbour_timeout, args.max_depth)
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, lambda *_: node.stop())
         try:
             node.learn_members()
             node.run()
+        except RingGainsError as exc:
+            print(f"btrack agent: unstable gains on the ring: {exc}", file=sys.stderr)
+            return 2
         finally:
             node.close()
             print(json.dumps({"agent": args.id, "ticks": node.ticks, "dropped": node.dropped,

@@ -15,7 +15,7 @@ poses.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -27,8 +27,11 @@ from agent.ringcontrol import RingController
 from report.measures import EdgeModel, TeamErrors, change_recovery, team_errors, team_measures
 from simworld.change import changing_map, frames
 from simworld.maps import GridMap, load_map
-from simworld.world import ODOM_NOISE, ROBOT_RADIUS_M, Reading, World
+from simworld.world import ODOM_NOISE, ROBOT_RADIUS_M, Reading, World, ring_depth_bins
 from wire import Scan
+
+if TYPE_CHECKING:
+    from report.ring import RingEdge
 
 DT_S = 0.1  # the world's tick at 10 Hz control
 
@@ -225,18 +228,25 @@ def measures(gmap: GridMap, tracks: Tracks) -> dict[str, float]:
     map's edge and true patrol depth as the world tells the recorder, the robots' true
     tracks, and what their agents published."""
     if tracks.s is not None and tracks.d is not None:  # a ring on a closed edge
-        from report.ring import RingEdge, ring_measures
+        from report.ring import ring_measures
 
-        length = gmap.closed_edge.length
-        bins = max(1, round(length / gmap.cell_m))
-        ring = RingEdge(length, length / bins, gmap.ring_patrol_depth_bins(bins),
-                        ROBOT_RADIUS_M)
+        ring = ring_edge(gmap)
         tr = tracks
         return ring_measures(tr.t, tracks.s, tracks.d, tr.lo, tr.hi, tr.direction,
                              tr.phase, tr.workload, ring)
     tr = tracks
     return team_measures(tr.t, tr.x, tr.y, tr.lo, tr.hi, tr.direction, tr.phase,
                          tr.workload, edge_model(gmap, tracks))
+
+
+def ring_edge(gmap: GridMap) -> RingEdge:
+    """A closed edge as the ring's measures see it, as the world tells the recorder
+    (``World.info``): its true patrol depth per bin of about a map cell round it."""
+    from report.ring import RingEdge
+
+    length = gmap.closed_edge.length
+    bins = ring_depth_bins(gmap)
+    return RingEdge(length, length / bins, gmap.ring_patrol_depth_bins(bins), ROBOT_RADIUS_M)
 
 
 def edge_model(gmap: GridMap, tracks: Tracks) -> EdgeModel:

@@ -1,8 +1,7 @@
 """``btrack sim --engine inprocess``: the whole team in this one process
 (deploy.engine, the same cores bit for bit as the bus), then its measures, with no
 recording: ``summary.json``, ``report.md`` and, round a closed edge, ``map.png`` and
-``errors.png``. A closed edge (an island map) runs this way only, so far, with truth
-poses."""
+``errors.png``. A closed edge (an island map) runs with truth poses, as over the bus."""
 
 from __future__ import annotations
 
@@ -75,15 +74,10 @@ def run(args: argparse.Namespace, out: Path, localization: str | None) -> int:
     result = measures(gmap, tracks)
     files = ["summary.json", "report.md"]
     if tracks.s is not None:
-        from report.ring import (
-            RingEdge,  # the measures' own edge, for the errors plot
-            ring_errors,
-            ring_figures,
-        )
+        from deploy.engine import ring_edge
+        from report.ring import ring_errors, ring_figures
 
-        length = gmap.closed_edge.length
-        bins = max(1, round(length / gmap.cell_m))
-        edge = RingEdge(length, length / bins, gmap.ring_patrol_depth_bins(bins))
+        edge = ring_edge(gmap)  # the measures' own edge, for the errors plot
         assert tracks.d is not None
         errors = ring_errors(tracks.t, tracks.s, tracks.d, tracks.lo, tracks.hi,
                              tracks.direction, tracks.phase, tracks.workload, edge)

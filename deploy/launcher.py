@@ -75,7 +75,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="no-algae | half-algae | random-algae | FILE.png | "
                    "procedural:SEED[,length=..,edge=..,amplitude=..,algae=..] (see btrack maps) "
                    "| floe:SEED[,shape=round|elongated|bay,size=..,algae=..] or closed:FILE.png "
-                   "(a closed edge, --engine inprocess) (default half-algae)")
+                   "(a closed edge: a ring, truth poses) (default half-algae)")
     p.add_argument("--scale", type=float, default=0.05, help="PNG map metres per pixel")
     p.add_argument("--start", default="ahead:1",
                    help="in-phase | ahead:K (robot K starts 72 deg ahead; default ahead:1)")
@@ -145,8 +145,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="bus: every part its own process over Zenoh; inprocess: the whole "
                    "team in this process (deploy.engine, the same cores bit for bit), "
                    "measures and figures but no recording. A closed edge (an island map: "
-                   "floe:SEED,.. or a PNG whose ice touches no border) runs in-process "
-                   "only, so far, with truth poses [bus]")
+                   "floe:SEED,.. or a PNG whose ice touches no border) runs either way, "
+                   "with truth poses [bus]")
     p.add_argument("--hil-faults", type=float, metavar="P",
                    help="with --hil: fraction of device messages damaged on purpose (0.005)")
     return p
@@ -327,6 +327,20 @@ def hil_refusal(args: argparse.Namespace) -> str | None:
     return None
 
 
+def ring_refusal(args: argparse.Namespace) -> str | None:
+    """What a ring round a closed edge cannot do over the bus yet; None if nothing."""
+    if args.localization not in (None, "truth"):
+        return (f"--localization {args.localization}: a ring on a closed edge runs with truth "
+                "poses only, so far (the laser's view round a floe is later work)")
+    given = [flag for flag, value in (("--fault", args.fault), ("--chaos", args.chaos),
+                                      ("--sensors lab", args.sensors == "lab"),
+                                      ("--hil", args.hil)) if value]
+    if given:
+        return (f"{', '.join(given)}: not on a ring round a closed edge yet (faults on a "
+                "ring, the lab's sensors and the hardware loop round a floe are later work)")
+    return None
+
+
 def refusal(args: argparse.Namespace, bodies: int) -> str | None:
     """Why the run cannot go as asked, before any process starts; None if it can.
     ``bodies`` is the team plus every id that joins (``run`` has checked the team)."""
@@ -373,9 +387,9 @@ def refusal(args: argparse.Namespace, bodies: int) -> str | None:
         return (f"--change {late} would begin after the run's end (--duration "
                 f"{args.duration:g} s)")
     if gmap.closed and args.engine != "inprocess":
-        return (f"{args.map} is a closed edge (an island): a ring runs in-process only, so "
-                "far: add --engine inprocess (truth poses); over the bus, a ring's agents, "
-                "world and report are later work")
+        why = ring_refusal(args)
+        if why:
+            return why
     edge = gmap.edge_hi - gmap.edge_lo
     if bodies * gains.min_segment_m > edge:
         return (f"{bodies} robots need {bodies * gains.min_segment_m:.2f} m of edge at "
@@ -435,8 +449,9 @@ def run(args: argparse.Namespace) -> int:
         return 2
     why = hil_refusal(args) or refusal(args, bodies)
     asked_localization = args.localization  # the in-process engine has its own default
-    if args.localization is None:
-        args.localization = "pf"
+    closed = why is None and load_map(args.map, args.scale, args.seed).closed
+    if args.localization is None:  # a ring has no laser's view round it yet: truth
+        args.localization = "truth" if closed else "pf"
     if why is None and not args.hil:
         late = [f for f in schedule if f.at_s >= args.duration]
         if late:
@@ -450,7 +465,8 @@ def run(args: argparse.Namespace) -> int:
         return 2
     defaults = Gains()  # a ring's bound is checked where its controllers are made
     problems = check_gains(args.robots, defaults.k_phi if args.k_phi is None else args.k_phi,
-                           defaults.k_s if args.k_s is None else args.k_s, 2.0)
+                           defaults.k_s if args.k_s is None else args.k_s, 2.0,
+                           closed=closed and args.engine == "bus")
     if problems:
         print("btrack sim: unstable gains: " + "; ".join(problems), file=sys.stderr)
         return 2

@@ -9,6 +9,7 @@ The recorder process and the tests that build synthetic runs share this code.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Any, BinaryIO
 
@@ -211,7 +212,8 @@ class Recording:
             self.info = self._depth_info = msg
             self._widen_bounds(msg)
             return None
-        if (msg.edge_lo, msg.edge_hi, msg.dt) != (first.edge_lo, first.edge_hi, first.dt):
+        if ((msg.edge_lo, msg.edge_hi, msg.dt, msg.closed, msg.contour)
+                != (first.edge_lo, first.edge_hi, first.dt, first.closed, first.contour)):
             return "a second world with another edge or tick"
         if (msg.change, msg.change_windows) != (first.change, first.change_windows):
             return "a second world with other changes of the map"
@@ -238,8 +240,11 @@ class Recording:
         """The agents' states are judged against the deepest true depth so far."""
         deepest = max(msg.patrol_depth, default=0.0) + DEPTH_SLACK_M
         if self._state_bounds is None or deepest > self._state_bounds.depth_max:
-            self._state_bounds = plausible.Bounds(msg.edge_lo, msg.edge_hi, deepest,
-                                                  msg.bin_m, plausible.NO_PASS_LIMIT)
+            # on a ring the agents' bins are of their own depth maps, not the world's:
+            # the recorder, which acts on no depth, does not judge them there
+            self._state_bounds = plausible.Bounds(
+                msg.edge_lo, msg.edge_hi, deepest, msg.bin_m, plausible.NO_PASS_LIMIT,
+                closed=msg.closed, reach_m=math.inf)
 
     def _note_tick(self, tick: Tick) -> None:
         self.last_tick = tick

@@ -245,6 +245,8 @@ def make_report(
 
     run_dir = Path(run_dir)
     run = load_run(run_dir / "run.mcap")
+    if run.info.get("closed"):
+        return ring_report(run_dir, run)
     table = run_table(run)  # the run as one table, for every measure and figure
     rev = revisit(run, table.t)
     loc = localization_errors(run)
@@ -268,6 +270,111 @@ def make_report(
     markdown += changes_markdown(summary.get("change") or "", summary.get("changes") or [])
     (run_dir / "report.md").write_text(markdown)
     return summary
+
+
+# What a ring's report.md lists, as the in-process engine's does (deploy.inprocess)
+RING_ROWS = (
+    ("phase_sse_rad", "phase steady-state error, position-based, eq. 3.1 (rad)"),
+    ("phase_max_rad", "phase error, position-based, max over last quarter (rad)"),
+    ("phase_path_sse_rad", "phase steady-state error, path length (rad)"),
+    ("workload_sse_m2", "workload steady-state error (m^2)"),
+    ("workload_mean_m2", "mean workload per robot, the ring's true workload / n (m^2)"),
+    ("workload_rel_sse", "workload steady-state error / mean workload"),
+    ("workload_rel_max", "workload error, max over last quarter / mean workload"),
+    ("revisit_worst_s", "revisit time, worst, second half (s)"),
+    ("revisit_optimum_s", "revisit time, optimum of a patrolled cycle, L / (n v) (s)"),
+    ("revisit_worst_ratio", "revisit time, worst / L / (n v)"),
+    ("revisit_worst_ratio_partition", "revisit time, worst / 2 L / (n v)"),
+    ("converge_s", "converged after, phase and absolute workload (s)"),
+    ("edge_length_m", "the closed edge's length (m)"),
+    ("still_frac_max", "standing still, largest fraction of the last quarter of a robot"),
+    ("speedup", "speed-up (simulated / wall time)"),
+    ("ticks", "ticks recorded"),
+    ("ticks_expected", "ticks in the run"),
+    ("invalid_messages", "invalid messages"),
+    ("rejected_messages", "messages refused as implausible (recorder, agents, world)"),
+)
+
+
+def ring_report(run_dir: Path, run: Any) -> dict[str, Any]:
+    """``make_report`` of a ring round a closed edge: the ring's measures
+    (``report.ring.ring_measures``, every pair round the ring) from the recording, as the
+    in-process engine gives them from its tracks, ``summary.json``, ``map.png``,
+    ``errors.png`` and ``report.md``."""
+    import numpy as np
+
+    from report import measures as m
+    from report.ring import (
+        contour_edge,
+        ring_edge_of,
+        ring_errors,
+        ring_figures,
+        ring_measures,
+        ring_tracks,
+    )
+    from report.series import time_grid
+    from report.summary import recording_completeness, rejected_messages
+
+    info = run.info
+    edge = contour_edge(info["contour"])
+    ring = ring_edge_of(info)
+    t = time_grid(run)
+    tracks = ring_tracks(
+        t, edge, {r: (p.t, p.x, p.y, p.theta) for r, p in run.positions.items()},
+        {r: (st.t, st.lo, st.hi, st.direction, st.phase, st.workload)
+         for r, st in run.states.items()})
+    tr = tracks
+    result = ring_measures(t, tr.s, tr.d, tr.lo, tr.hi, tr.direction, tr.phase, tr.workload,
+                           ring)
+    summary: dict[str, Any] = {
+        **{k: info.get(k) for k in ("map", "start", "robots", "localization", "seed",
+                                    "duration_s", "odom_noise", "odom_turn_noise")},
+        "closed": True,
+        "speedup": m.speedup(run.tick_t, run.tick_log_ns),
+        **result,
+        "ticks": int(run.tick_t.size),
+        **recording_completeness(run),
+        "invalid_messages": int(run.invalid),
+        "rejected_messages": rejected_messages(run),
+        "refused": run.refused,
+        "positions_from": run.positions_from,
+        # every robot's arc [lo, hi] in its own frame at the run's last tick
+        "arcs_end": [[float(tr.lo[j, -1]), float(tr.hi[j, -1])] for j in range(len(tr.ids))],
+    }
+    summary = json_safe(summary)
+    write_summary(run_dir / "summary.json", summary)
+    errors = ring_errors(t, tr.s, tr.d, tr.lo, tr.hi, tr.direction, tr.phase, tr.workload,
+                         ring)
+    gmap = _ring_map(info, edge.length)
+    mean = float(result["workload_mean_m2"])
+    ring_figures(gmap, t, tr.x, tr.y, errors, tr.lo,
+                 mean if np.isfinite(mean) else 0.0, run_dir, edge=edge)
+    head = ", ".join(f"{k} {_fmt(summary.get(k))}"
+                     for k in ("map", "start", "robots", "localization", "seed", "duration_s"))
+    lines = ["# Run report: a ring round a closed edge", "", head, "",
+             *_recording_note(summary), "| measure | value |", "| --- | --- |"]
+    lines += [f"| {label} | {_fmt(summary.get(key))} |" for key, label in RING_ROWS]
+    lines += ["", "Every pair of neighbours round the ring, the pair (n-1, 0) included; s "
+              "along the contour, revisit times of points every 0.1 m round it against "
+              "L / (n v), the optimum of a patrolled cycle (each robot sweeping its own arc "
+              "to and fro reaches 2 L / (n v) at best).", "", *goals_markdown(summary),
+              "![map](map.png)", "", "![errors](errors.png)", ""]
+    (run_dir / "report.md").write_text("\n".join(lines))
+    return summary
+
+
+def _ring_map(info: dict[str, Any], length: float) -> Any:
+    """The recorded map rebuilt from its name, to draw under the contour; None where it
+    cannot be (a PNG not here, or one whose contour is not the recording's)."""
+    from simworld.maps import MapError, load_map
+
+    try:
+        gmap = load_map(str(info.get("map")), seed=int(info.get("seed") or 1))
+        if not gmap.closed or abs(gmap.closed_edge.length - length) > 1e-6 * length:
+            return None
+    except (MapError, OSError, ValueError):
+        return None
+    return gmap
 
 
 def main(argv: list[str] | None = None) -> int:

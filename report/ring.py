@@ -7,6 +7,11 @@ whole turn of its arc), d across it, positive into the ice. The errors and their
 steady state are the chain's (``report.measures.error_measures``) on the ring's pairs;
 a visit of a point is a crossing of the contour (d = 0) within the robot's radius of it,
 distances taken round the ring.
+
+A recorded ring (``ring_tracks``) comes to the same tracks as the in-process engine's:
+the contour from the world's WorldInfo, each robot's true pose projected onto it tick by
+tick from the last s as its agent does (``ClosedEdge.to_edge``), in the whole turn of the
+arc its agent published at that tick.
 """
 
 from __future__ import annotations
@@ -17,14 +22,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from agent.edgeframe import ClosedEdge
 from agent.phase import position_to_phase_array as position_phase
 from agent.phase import wrap_pi_array as wrap_pi
+from agent.ring import frame_shift
 from report.measures import (
     POINT_STEP_M,
     VISIT_MERGE_S,
     TeamErrors,
     crossings,
     error_measures,
+    hold,
     idleness_measures,
     nanmax,
     path_length_phase,
@@ -62,6 +70,76 @@ class RingEdge:
         area = np.concatenate([[0.0], np.cumsum(depth * self.bin_m)])
         turns = np.floor(s / self.length)
         return turns * area[-1] + np.interp(s - turns * self.length, edges, area)
+
+
+def contour_edge(contour: Sequence[float]) -> ClosedEdge:
+    """The closed edge of WorldInfo's flat contour [x0, y0, x1, y1, ...]."""
+    pts = [float(v) for v in contour]
+    return ClosedEdge(list(zip(pts[0::2], pts[1::2], strict=True)))
+
+
+def ring_edge_of(info: dict[str, object]) -> RingEdge:
+    """The ring as the measures see it, from a recorded WorldInfo (as a dict)."""
+    depth = info.get("patrol_depth") or ()
+    assert isinstance(depth, (list, tuple))
+    return RingEdge(float(info["edge_hi"]) - float(info["edge_lo"]),  # type: ignore[arg-type]
+                    float(info["bin_m"]), tuple(float(d) for d in depth),  # type: ignore[arg-type]
+                    float(info.get("robot_radius", 0.17)))  # type: ignore[arg-type]
+
+
+@dataclass
+class RingTracks:
+    """A recorded ring's run on its ticks, arrays (robots, ticks) in id order: the true
+    pose (x, y; s in each agent's frame, d) and what each agent published."""
+
+    t: np.ndarray
+    ids: list[int]
+    x: np.ndarray
+    y: np.ndarray
+    s: np.ndarray
+    d: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    direction: np.ndarray
+    phase: np.ndarray
+    workload: np.ndarray
+
+
+def ring_tracks(t: np.ndarray, edge: ClosedEdge, truth: dict[int, tuple[np.ndarray, ...]],
+                states: dict[int, tuple[np.ndarray, ...]]) -> RingTracks:
+    """Every robot's track and published state held on the ticks ``t``: ``truth`` by id
+    (t, x, y, theta) and ``states`` by id (t, lo, hi, direction, phase, workload). The
+    true s follows the pose from tick to tick as the agent's own frame does (the
+    projection from the last s, the first one without), unwrapped as the agent does by
+    the arc it steered with, then put in the whole turn of the arc published at that
+    tick."""
+    ids = sorted(states)
+    n, ticks = len(ids), t.size
+    arrays = [np.full((n, ticks), np.nan) for _ in range(9)]
+    x, y, s, d, lo, hi, direction, phase, work = arrays
+    for j, rid in enumerate(ids):
+        st = states[rid]
+        for row, values in zip((lo, hi, direction, phase, work), st[1:], strict=True):
+            row[j] = hold(st[0], values, t)
+        if rid not in truth:
+            continue
+        tr = truth[rid]
+        x[j], y[j] = hold(tr[0], tr[1], t), hold(tr[0], tr[2], t)
+        th = hold(tr[0], tr[3], t)
+        hint: float | None = None
+        for k in range(ticks):
+            if not (np.isfinite(x[j, k]) and np.isfinite(lo[j, k])):
+                continue
+            if hint is None:
+                hint = edge.project(float(x[j, k]), float(y[j, k]))[0]
+            sk, d[j, k], _ = edge.to_edge(float(x[j, k]), float(y[j, k]), float(th[k]), hint)
+            hint = sk
+            # as the agent unwraps it: by the arc it steered with (the tick before's), then
+            # into the turn of the arc it ends the tick with (deploy.engine's tracks)
+            before = k - 1 if k > 0 and np.isfinite(lo[j, k - 1]) else k
+            sk += frame_shift(sk, 0.5 * (lo[j, before] + hi[j, before]), edge.length)
+            s[j, k] = sk + frame_shift(sk, 0.5 * (lo[j, k] + hi[j, k]), edge.length)
+    return RingTracks(t, ids, x, y, s, d, lo, hi, direction, phase, work)
 
 
 def ring_pairs(n: int) -> list[tuple[int, int]]:
@@ -149,10 +227,12 @@ def ring_measures(t: np.ndarray, s: np.ndarray, d: np.ndarray, lo: np.ndarray,
 
 def ring_figures(gmap: object, t: np.ndarray, x: np.ndarray, y: np.ndarray,
                  errors: TeamErrors, lo: np.ndarray, mean_workload: float,
-                 out_dir: object) -> list[str]:
+                 out_dir: object, edge: ClosedEdge | None = None) -> list[str]:
     """``map.png`` (the floe, its closed contour, each robot's arc at the end and its
     track over the last eighth of the run) and ``errors.png`` (phase and relative
-    workload error of every pair round the ring against time); the files' names."""
+    workload error of every pair round the ring against time); the files' names.
+    ``gmap`` (a GridMap) draws the ice and algae under the contour; with None, ``edge``
+    (the contour of a recording) is drawn alone."""
     from pathlib import Path
 
     import matplotlib
@@ -162,15 +242,16 @@ def ring_figures(gmap: object, t: np.ndarray, x: np.ndarray, y: np.ndarray,
 
     from simworld.maps import GridMap
 
-    assert isinstance(gmap, GridMap)
     out = Path(str(out_dir))
-    edge = gmap.closed_edge
     colours = plt.get_cmap("tab10")
     fig, ax = plt.subplots(figsize=(7, 7))
-    kind = gmap.ice.astype(int) + gmap.algae.astype(int)
-    palette = np.array([[0.55, 0.7, 1.0], [1.0, 1.0, 1.0], [0.45, 0.85, 0.45]])
-    ax.imshow(palette[kind], origin="lower",
-              extent=(0.0, gmap.width_m, gmap.y_bottom, gmap.y_top))
+    if isinstance(gmap, GridMap):
+        edge = gmap.closed_edge
+        kind = gmap.ice.astype(int) + gmap.algae.astype(int)
+        palette = np.array([[0.55, 0.7, 1.0], [1.0, 1.0, 1.0], [0.45, 0.85, 0.45]])
+        ax.imshow(palette[kind], origin="lower",
+                  extent=(0.0, gmap.width_m, gmap.y_bottom, gmap.y_top))
+    assert edge is not None, "a map or a contour to draw"
     pts = np.asarray(edge.points + edge.points[:1])
     ax.plot(pts[:, 0], pts[:, 1], color="k", lw=1.0, label="closed edge (s = 0 at the dot)")
     ax.plot(*edge.points[0], "ko", ms=4)
@@ -186,7 +267,8 @@ def ring_figures(gmap: object, t: np.ndarray, x: np.ndarray, y: np.ndarray,
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    ax.set_title(f"{gmap.name}\n{n} robots; bars: where each arc starts at the end", fontsize=9)
+    name = gmap.name if isinstance(gmap, GridMap) else "closed edge"
+    ax.set_title(f"{name}\n{n} robots; bars: where each arc starts at the end", fontsize=9)
     ax.legend(loc="upper right", fontsize=7)
     fig.tight_layout()
     fig.savefig(out / "map.png", dpi=110)

@@ -236,10 +236,7 @@ def compute_summary(
         "ticks": int(run.tick_t.size),
         **recording_completeness(run),
         "invalid_messages": int(run.invalid),
-        # well-formed messages refused as implausible by the recorder, agents and world
-        "rejected_messages": (sum(run.rejected.values())
-                              + sum(run.refused.get("agents_rejected", {}).values())
-                              + int(run.refused.get("world_rejected", 0))),
+        "rejected_messages": rejected_messages(run),
         "refused": run.refused,
         "coverage_gap_m_s": _integral(s.t, gap),
         "faults": fault_measures(run, s, gap, workload_band, CONVERGE_SMOOTH_S),
@@ -253,6 +250,12 @@ def compute_summary(
     }
     assert set(out) == set(KEYS), set(out) ^ set(KEYS)
     return json_safe({key: out[key] for key in KEYS})
+
+
+def rejected_messages(run: RunData) -> int:
+    """Well-formed messages refused as implausible by the recorder, agents and world."""
+    return (sum(run.rejected.values()) + sum(run.refused.get("agents_rejected", {}).values())
+            + int(run.refused.get("world_rejected", 0)))
 
 
 def recording_completeness(run: RunData) -> dict[str, Any]:

@@ -303,6 +303,7 @@ class WorldProcess(WorldShell):
             world.move(robot, dx, dy)
             log.warning("tick %d: robot %d carried by (%g, %g) m", k, robot, dx, dy)
         odometry = self.pose_source == "odometry"
+        closed = world.map.closed
         truth = [world.truth(i) for i in range(self.n)]
         motions = list(world.motion)
         for j, laser in enumerate(self.lasers):  # the localizer publishes the poses
@@ -330,7 +331,7 @@ class WorldProcess(WorldShell):
             else:
                 pose, source = [], ""
             sense = Sense(t, k, i, r.ice, r.algae, r.odom_dist_m, r.odom_dtheta, lo, hi, dt,
-                          pose, source)
+                          pose, source, closed)
             self.pub_sense[i].put(encode(sense))  # an agent may act on its Sense
         # for the recorder only, after the agents' inputs; one message for the team
         self.pub_truth.put(encode(Truth.of_team(t, k, truth)))
@@ -524,6 +525,11 @@ def main(argv: list[str] | None = None) -> int:
     if gmap is None:
         return 2
     lab = profile(args.sensors)
+    if gmap.closed and (args.localization == "pf" or lab is not None):
+        print("btrack world: a closed edge (a ring round a floe) has no laser's view round it"
+              " yet: use --localization truth or odometry and --sensors ideal",
+              file=sys.stderr)
+        return 2
     try:
         change = changing_map(gmap, args.change, args.scale, args.seed)
     except ChangeError as exc:

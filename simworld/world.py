@@ -210,6 +210,8 @@ class World:
         and edge come per bin of ``bin_m``, by default the map's own cell, so the
         report's true workload is the map's, not a binned copy of it (a step of the
         algae inside a 0.1 m bin would otherwise move with the bin's side)."""
+        if self.map.closed:
+            return self._ring_info()
         bin_m = self.map.cell_m if bin_m is None else bin_m
         change = self.change
         if change is not None:  # the depth in force from now, and when the map changes
@@ -230,6 +232,32 @@ class World:
             "odom_noise": self.odom_noise,
             "odom_turn_noise": self.odom_turn_noise,
         }
+
+    def _ring_info(self) -> dict[str, object]:
+        """``info`` on a closed edge: its contour, and the true patrol depth per bin of a
+        whole number of bins about a map cell long round it from s = 0 (as
+        ``deploy.engine.measures`` bins it)."""
+        edge = self.map.closed_edge
+        bins = ring_depth_bins(self.map)
+        return {
+            "edge_lo": 0.0,
+            "edge_hi": edge.length,
+            "bin_m": edge.length / bins,
+            "patrol_depth": self.map.ring_patrol_depth_bins(bins),
+            "robot_radius": ROBOT_RADIUS_M,
+            "min_depth": MIN_DEPTH_M,
+            "margin_out": MARGIN_OUT_M,
+            "odom_noise": self.odom_noise,
+            "odom_turn_noise": self.odom_turn_noise,
+            "closed": True,
+            "contour": [v for point in edge.points for v in point],
+        }
+
+
+def ring_depth_bins(gmap: GridMap) -> int:
+    """How many bins the true patrol depth of a closed edge comes in: a whole number, each
+    about one map cell long."""
+    return max(1, round(gmap.closed_edge.length / gmap.cell_m))
 
 
 __all__ = ["ROBOT_RADIUS_M", "Reading", "World", "parse_start", "start_poses"]

@@ -11,35 +11,56 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import threading
+from typing import Any
 
-from wire import AgentState, Keys, Tick, decode, encode
+from wire import AgentState, Keys, Tick, WorldInfo, decode, encode
 from wire.session import SessionOptions, open_session
 
 
-def main() -> None:
+def forger_args() -> tuple[argparse.Namespace, Keys, SessionOptions]:
+    """A forger's command line (``--ns``, ``--connect``, ``--at K``), its namespace's
+    keys and its session: a client of the run's router, multicast off."""
     p = argparse.ArgumentParser()
     p.add_argument("--ns", required=True)
     p.add_argument("--connect", required=True)
     p.add_argument("--at", type=int, required=True, help="the world's tick to lie at")
     args = p.parse_args()
-    keys = Keys(args.ns)
     opts = SessionOptions(ns=args.ns, mode="client", connect=(args.connect,), multicast=False)
+    return args, Keys(args.ns), opts
+
+
+def hear_until(session: Any, keys: Keys, at: int, info: bool = False
+               ) -> tuple[dict[str, Any], list[Any]]:
+    """Listen to the world's ticks and robot 1's states (and, with ``info``, the world's
+    WorldInfo) until the world's tick ``at`` has come with them; what was heard, by
+    "tick", "state" (the latest) and "info", and the subscribers."""
+    now = threading.Event()
+    heard: dict[str, Any] = {}
+
+    def on_tick(sample: Any) -> None:
+        tick = decode(Tick, sample.payload.to_bytes())
+        if tick.k >= at and (not info or "info" in heard) and not now.is_set():
+            heard["tick"] = tick
+            now.set()
+
+    def on_state(sample: Any) -> None:
+        heard["state"] = decode(AgentState, sample.payload.to_bytes())
+
+    def on_info(sample: Any) -> None:
+        heard["info"] = decode(WorldInfo, sample.payload.to_bytes())
+
+    subs = [session.declare_subscriber(keys.world_tick(), on_tick),
+            session.declare_subscriber(keys.state(1), on_state)]
+    if info:
+        subs.append(session.declare_subscriber(keys.world_info(), on_info))
+    now.wait()
+    return heard, subs
+
+
+def main() -> None:
+    args, keys, opts = forger_args()
     with open_session(opts) as session:
-        now = threading.Event()
-        heard: dict[str, object] = {}
-
-        def on_tick(sample) -> None:  # noqa: ANN001
-            tick = decode(Tick, sample.payload.to_bytes())
-            if tick.k >= args.at and not now.is_set():
-                heard["tick"] = tick
-                now.set()
-
-        def on_state(sample) -> None:  # noqa: ANN001
-            heard["state"] = decode(AgentState, sample.payload.to_bytes())
-
-        subs = [session.declare_subscriber(keys.world_tick(), on_tick),
-                session.declare_subscriber(keys.state(1), on_state)]
-        now.wait()
+        heard, subs = hear_until(session, keys, args.at)
         tick = heard["tick"]
         real = heard["state"]
         assert isinstance(tick, Tick) and isinstance(real, AgentState)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -117,6 +118,46 @@ def wait_for(cond: Callable[[], bool], timeout: float, what: str) -> None:
         time.sleep(0.02)
 
 
+def wait_port(port: int, timeout_s: float = 60.0) -> None:
+    """Wait until something listens on loopback ``port`` (a run's router)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        with socket.socket() as s:
+            if s.connect_ex(("127.0.0.1", port)) == 0:
+                return
+        time.sleep(0.05)
+    raise AssertionError(f"nothing listens on {port}")
+
+
+def run_attacked(out: Path, sim_args: list[str], forger: str, lie_at: int,
+                 timeout: float = 300) -> tuple[subprocess.CompletedProcess[str], str]:
+    """``btrack sim`` to its end on a private namespace and port with a forger process
+    (``python -m FORGER --ns --connect --at LIE_AT``) on its bus from the moment its router
+    listens; the run and what the forger printed. Every process is ended by its pid."""
+    ns, port = unique_ns(), free_port()
+    sim = subprocess.Popen(
+        [sys.executable, "-m", "btrack", "sim", "--out", str(out), "--quiet", *sim_args,
+         "--ns", ns, "--port", str(port), "--no-scene"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    liar = None
+    try:
+        wait_port(port)
+        liar = subprocess.Popen(
+            [sys.executable, "-m", forger, "--ns", ns, "--connect", f"tcp/127.0.0.1:{port}",
+             "--at", str(lie_at)],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+        stdout, stderr = sim.communicate(timeout=timeout)
+        assert liar.poll() is None, liar.communicate()[1]  # it lied and waits to be ended
+    finally:
+        end(sim)  # type: ignore[arg-type]
+        end_children_of_run(out)
+        if liar is not None:
+            end(liar)  # type: ignore[arg-type]
+    assert liar.stdout is not None
+    return subprocess.CompletedProcess(sim.args, sim.returncode, stdout, stderr), \
+        liar.stdout.read()
+
+
 def wait_for_world(run_dir: Path, launcher: subprocess.Popen[str], timeout_s: float = 60
                    ) -> dict[str, int]:
     """The pids a launcher recorded in RUN_DIR/logs/pids.json, once its world is started;
@@ -132,4 +173,5 @@ def wait_for_world(run_dir: Path, launcher: subprocess.Popen[str], timeout_s: fl
 
 
 __all__ = ["end", "end_children_of_run", "free_port", "hub_session", "kill_pid", "member_args",
-           "pid_alive", "run_sim", "start", "unique_ns", "wait_for", "wait_for_world"]
+           "pid_alive", "run_attacked", "run_sim", "start", "unique_ns", "wait_for",
+           "wait_for_world", "wait_port"]

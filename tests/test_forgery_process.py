@@ -8,30 +8,15 @@ neighbours off their segments and slowed the lockstep to a tick a second."""
 from __future__ import annotations
 
 import json
-import socket
-import subprocess
-import sys
-import time
 
 import pytest
 
-from deploy.procs import free_port
 from report.load import load_run
 from report.summary import compute_summary
-from tests.procutil import end, end_children_of_run, run_sim, unique_ns
+from tests.procutil import run_attacked, run_sim
 
 DURATION = ["--localization", "truth", "--duration", "40", "--seed", "3", "--robots", "3"]
 LIE_AT = 150  # the world's tick the forger lies at
-
-
-def _wait_port(port: int, timeout_s: float = 60.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        with socket.socket() as s:
-            if s.connect_ex(("127.0.0.1", port)) == 0:
-                return
-        time.sleep(0.05)
-    raise AssertionError(f"nothing listens on {port}")
 
 
 @pytest.fixture(scope="module")
@@ -39,27 +24,9 @@ def runs(tmp_path_factory):
     root = tmp_path_factory.mktemp("forgery")
     clean = run_sim(root / "clean", *DURATION, "--no-report", timeout=300)
     assert clean.returncode == 0, clean.stderr
-    ns, port, out = unique_ns(), free_port(), root / "attacked"
-    sim = subprocess.Popen(
-        [sys.executable, "-m", "btrack", "sim", "--out", str(out), "--quiet", *DURATION,
-         "--ns", ns, "--port", str(port), "--no-scene"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
-    forger = None
-    try:
-        _wait_port(port)
-        forger = subprocess.Popen(
-            [sys.executable, "-m", "tests.forger", "--ns", ns, "--connect",
-             f"tcp/127.0.0.1:{port}", "--at", str(LIE_AT)],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
-        stdout, stderr = sim.communicate(timeout=300)
-        assert forger.poll() is None, forger.communicate()[1]  # it lied and held its token
-    finally:
-        end(sim)  # type: ignore[arg-type]
-        end_children_of_run(out)
-        if forger is not None:
-            end(forger)  # type: ignore[arg-type]
-    assert forger.stdout is not None
-    return root / "clean", out, sim.returncode, stdout, stderr, forger.stdout.read()
+    out = root / "attacked"
+    sim, lied = run_attacked(out, DURATION, "tests.forger", LIE_AT)
+    return root / "clean", out, sim.returncode, sim.stdout, sim.stderr, lied
 
 
 def test_the_run_is_recorded_whole_and_the_lies_are_counted(runs):

@@ -446,3 +446,25 @@ def test_a_joiners_first_claim_never_runs_past_a_live_neighbour(team, data):
         assert lo >= (heard[lower].lo + heard[lower].hi) / 2 if lower in heard else lo > EDGE[0]
     if upper is not None:  # never up past robot `upper`
         assert hi <= (heard[upper].lo + heard[upper].hi) / 2 if upper in heard else hi < EDGE[1]
+
+
+def test_on_a_ring_the_neighbours_wrap_and_the_first_arcs_are_equal() -> None:
+    from agent.membership import Membership as M
+
+    m: M = M(0, 4)
+    for r in (1, 2, 3):
+        m.alive(r, True)
+    assert m.neighbours() == (None, 1)  # a chain until the sensing says the edge is closed
+    m.close_ring()
+    assert m.neighbours() == (3, 1) and m.team_heard()
+    m.alive(3, False)  # robot 0's lower neighbour round the ring is now robot 2
+    assert m.neighbours() == (2, 1) and 3 in m.candidates()
+    assert m.first_segment(0, 0.0, 8.0) == (0.0, 2.0)
+    last: M = M(3, 4, ring=True)
+    assert last.first_segment(0, 0.0, 8.0) == (6.0, 8.0) and last.neighbours() == (None, None)
+    assert last.decide(0, 0.0) is Decision.WAIT  # its ring neighbours 2 and 0 are not up
+    last.alive(0, True)
+    last.alive(2, True)
+    assert last.neighbours() == (2, 0) and last.decide(0, 0.0) is Decision.ACT
+    with pytest.raises(ValueError, match="before its first tick"):
+        last.close_ring()

@@ -146,3 +146,74 @@ def test_the_other_value_rules():
                                                BOUNDS, 5)
     assert "passes per sweep" in state_problem(dataclasses.replace(s, passes=21), BOUNDS, 5)
     assert state_problem(dataclasses.replace(s, passes=20), BOUNDS, 5) is None
+
+
+# On a ring: each robot's arc in its own frame, which may differ from its neighbours' by
+# whole turns; the law run by agent.ring.ring_update is never refused, lies are.
+RING_L = 10.0
+RING_BOUNDS = Bounds(0.0, RING_L, depth_max=7.3, bin_m=0.1, max_passes=20, closed=True,
+                     reach_m=0.3, reach_fraction=0.5)
+
+
+def ring_state(robot: int, k: int, lo: float, hi: float, depth: float, n: int,
+               **kw: object) -> AgentState:
+    mid = int(0.5 * (lo + hi) // 0.1)
+    fields: dict = dict(lower=(robot - 1) % n, upper=(robot + 1) % n, edge_hi=RING_L,
+                        closed=True, end_bins=[int(lo // 0.1), mid])
+    fields.update(kw)
+    return state(robot, k, lo, hi, depth, n, **fields)
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(3, 8), ticks=st.integers(2, 10), seed=st.integers(0, 10**6),
+       turns=st.lists(st.integers(-3, 3), min_size=8, max_size=8),
+       start=st.floats(0.0, RING_L))
+def test_a_ring_run_by_the_law_is_never_refused_in_any_turn(n, ticks, seed, turns, start):
+    import random
+
+    from agent.ring import arc_lengths, ring_update
+
+    rng = random.Random(seed)
+    bounds = [start + RING_L * i / n for i in range(n)]  # robot n-1's arc straddles s = L
+    depths = [rng.uniform(0.3, 3.0) for _ in range(n)]
+    history: list[list[AgentState]] = []
+    for k in range(ticks):
+        arcs = arc_lengths(bounds, RING_L)
+        # each robot's own frame: its arc moved by its own whole turns
+        states = [ring_state(i, k, bounds[i] + turns[i] * RING_L,
+                             bounds[i] + arcs[i] + turns[i] * RING_L, depths[i], n)
+                  for i in range(n)]
+        history.append(states)
+        new = ring_update(bounds, [s.workload for s in states], RING_L, K_S, MIN_SEG)
+        bounds = [new[0] + RING_L] + new[1:] if new[0] < bounds[0] - 0.5 * RING_L else new
+        depths = [max(0.3, d + rng.uniform(-0.05, 0.05)) for d in depths]
+    for k in range(1, ticks):
+        for i in range(n):
+            s, before = history[k][i], history[k - 1][i]
+            assert state_problem(s, RING_BOUNDS, k) is None
+            for me, side in (((i + 1) % n, "lower"), ((i - 1) % n, "upper")):
+                mine = {k - 1: claim(history[k - 1][me])}
+                assert neighbour_problem(s, me, side, mine, before, MIN_SEG, RING_L) is None
+
+
+def test_a_ring_state_off_the_law_by_other_than_whole_turns_is_refused() -> None:
+    n = 3
+    r1, r2 = ring_state(1, 4, 3.0, 6.0, 1.0, n), ring_state(2, 4, 6.0 - RING_L, 10.0 - RING_L,
+                                                            0.5, n)
+    mine = {4: claim(r2)}  # robot 2's frame is a turn below robot 1's
+    law = ring_state(1, 5, 3.0, 6.02, 1.0, n)
+    assert neighbour_problem(law, 2, "lower", mine, r1, MIN_SEG, RING_L) is None
+    wrapped = ring_state(1, 5, 3.0 + RING_L, 6.02 + RING_L, 1.0, n)  # a whole turn: no jump
+    assert neighbour_problem(wrapped, 2, "lower", mine, r1, MIN_SEG, RING_L) is None
+    for hi in (6.0 + 0.5 * RING_L, 8.5, 4.2):  # half a turn, or beyond the law's reach
+        moved = ring_state(1, 5, 3.0, hi, 1.0, n)
+        why = neighbour_problem(moved, 2, "lower", mine, r1, MIN_SEG, RING_L)
+        assert why is not None and "the law can put it only in" in why, hi
+    # its bins lie near its arc; one across the ring is refused, as a chain's state is
+    far = ring_state(1, 5, 3.0, 6.0, 1.0, n, end_bins=[80])
+    assert "from its arc" in (state_problem(far, RING_BOUNDS, 5) or "")
+    assert "open edge" in (state_problem(dataclasses.replace(law, closed=False),
+                                         RING_BOUNDS, 5) or "")
+    ring_on_chain = state(1, 5, 2.0, 4.0, closed=True)
+    assert "closed edge's state on an open one" in (state_problem(ring_on_chain, BOUNDS, 5)
+                                                    or "")

@@ -45,12 +45,16 @@ def test_a_ring_runs_round_a_floe_in_process(tmp_path: Path) -> None:
     assert "ring on a closed edge" in (out / "report.md").read_text()
 
 
-def test_an_island_png_is_a_ring_and_the_bus_refuses_it(tmp_path: Path) -> None:
+def test_an_island_png_is_a_ring_and_the_bus_refuses_its_pf_poses(tmp_path: Path) -> None:
     gmap = floe_map("floe:2,shape=bay,size=2.5,algae=none")
     png = tmp_path / "bay.png"
     write_png(gmap, png)
-    bus = btrack_sim("--map", str(png), "--scale", "0.01", "--out", str(tmp_path / "bus"))
-    assert bus.returncode == 2 and "--engine inprocess" in bus.stderr
+    bus = btrack_sim("--map", str(png), "--scale", "0.01", "--localization", "pf",
+                     "--out", str(tmp_path / "bus"))
+    assert bus.returncode == 2 and "truth poses only" in bus.stderr
+    odometry = btrack_sim("--map", str(png), "--scale", "0.01", "--localization",
+                          "odometry", "--out", str(tmp_path / "odometry"))
+    assert odometry.returncode == 2 and "truth poses only" in odometry.stderr
     pf = btrack_sim("--engine", "inprocess", "--map", str(png), "--scale", "0.01",
                     "--localization", "pf", "--out", str(tmp_path / "pf"))
     assert pf.returncode == 2 and "truth poses only" in pf.stdout + pf.stderr

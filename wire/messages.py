@@ -43,6 +43,9 @@ class Sense:
     # Sense and a Pose. Empty when the pose comes on its own (a localizer's Pose).
     pose: list[float] = field(default_factory=list)
     pose_source: str = ""  # truth | odometry, with a pose
+    # The edge is closed (issue 18: a ring round a floe): s is periodic, of length
+    # edge_hi - edge_lo; the contour comes in WorldInfo.
+    closed: bool = False
 
     def check(self) -> None:
         _require(self.t >= 0 and self.k >= 0 and self.robot >= 0, "negative t, k or robot")
@@ -168,6 +171,10 @@ class Cmd:
 
 MAX_CYCLE_S = 1e5  # no team cycle (or pass) is longer: a day
 MAX_PASSES = 10_000
+# A ring's arcs are in each robot's own frame of s, continuous in time, so they may
+# leave [edge_lo, edge_hi) by whole turns; by no more than this many.
+MAX_TURNS = 1000
+MAX_CONTOUR = 100_000  # vertices of a closed edge in WorldInfo, at most
 
 
 @dataclass(frozen=True)
@@ -209,6 +216,10 @@ class AgentState:
     need_above: float = 0.0
     span_below: float = 0.0
     span_above: float = 0.0
+    # On a closed edge (a ring): lo and hi are in the sender's own frame of s (its arc,
+    # continuous in time: it may leave [edge_lo, edge_hi) by whole turns of the edge's
+    # length), and so are its end_bins (bins of the ring's depth map, from s = 0).
+    closed: bool = False
 
     def check(self) -> None:
         _require(self.t >= 0 and self.k >= 0 and self.robot >= 0, "negative t, k or robot")
@@ -223,7 +234,14 @@ class AgentState:
         _require(len(self.end_bins) == len(self.end_depths),
                  "end_bins and end_depths must be as long as each other")
         _require(all(d >= 0 for d in self.end_depths), "negative depth")
-        _require(self.edge_lo <= self.lo < self.hi <= self.edge_hi, "boundaries outside the edge")
+        if self.closed:
+            turns = MAX_TURNS * span
+            _require(self.lo < self.hi <= self.lo + span, "an arc longer than the ring")
+            _require(self.edge_lo - turns <= self.lo and self.hi <= self.edge_hi + turns,
+                     f"an arc more than {MAX_TURNS} turns off the ring")
+        else:
+            _require(self.edge_lo <= self.lo < self.hi <= self.edge_hi,
+                     "boundaries outside the edge")
         _require(0.0 <= self.phase < TWO_PI, "phase outside [0, 2 pi)")
         _require(0.0 <= self.phase_des < TWO_PI, "phase_des outside [0, 2 pi)")
         _require(self.workload >= 0 and self.depth_avg >= 0, "negative workload or depth")
@@ -312,9 +330,21 @@ class WorldInfo:
     change: str = ""
     change_windows: list[float] = field(default_factory=list)
     depth_t: float = 0.0
+    # A closed edge (issue 18: an island's contour, a ring of robots): ``contour`` its
+    # vertices flat [x0, y0, x1, y1, ...] (m), counterclockwise with the ice on the
+    # left, s = 0 at the first; edge_lo is 0, edge_hi its length, and patrol_depth is
+    # per bin of bin_m round it from s = 0 (a whole number of bins make the ring). An
+    # agent builds its edge frame (agent.edgeframe.ClosedEdge) from it.
+    closed: bool = False
+    contour: list[float] = field(default_factory=list)
 
     def check(self) -> None:
         _require(self.edge_lo < self.edge_hi and self.bin_m > 0, "bad edge or bin")
+        if self.closed:
+            _require(6 <= len(self.contour) <= 2 * MAX_CONTOUR and len(self.contour) % 2 == 0,
+                     f"contour: 3 to {MAX_CONTOUR} vertices, x and y each")
+        else:
+            _require(not self.contour, "a contour on an open edge")
         w = self.change_windows
         _require(len(w) % 2 == 0 and all(a <= b for a, b in zip(w, w[1:], strict=False))
                  and all(w[i] < w[i + 1] for i in range(0, len(w), 2))
