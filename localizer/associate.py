@@ -101,8 +101,8 @@ def fast_blobs(centres: np.ndarray, recent: Sequence[np.ndarray], follow_m: floa
 
 def recovery(centres: np.ndarray, used: np.ndarray, predicted: np.ndarray,
              started: np.ndarray, missed: np.ndarray, still: np.ndarray | None,
-             moved: np.ndarray, rules: Recovery, fast: np.ndarray | None = None
-             ) -> list[tuple[int, int]]:
+             moved: np.ndarray, rules: Recovery, fast: np.ndarray | None = None,
+             scan_s: float = 0.0) -> list[tuple[int, int]]:
     """Which lost robot is re-seeded on which free blob (centres not ``used``), as
     (robot, centre index) pairs.
 
@@ -116,8 +116,10 @@ def recovery(centres: np.ndarray, used: np.ndarray, predicted: np.ndarray,
     while too few scans tell) marks the blobs that stood still; ``moved``, the robots
     whose odometry drove: a blob that stood still is no robot that drove, and one that
     moved is no robot never seeded whose wheels stood (one parked, waiting to join). A
-    robot with a pose may take a moving blob though its odometry stood: its wheels may
-    be what failed; but none takes one ``fast`` marks (faster than a robot drives)."""
+    robot with a pose may take a moving blob though its odometry stood (its wheels may
+    be what failed), but with ``top_speed_m_s`` set only as far as it can have driven
+    since (``scan_s`` the time between scans); and none takes one ``fast`` marks (faster
+    than a robot drives)."""
     lost = np.flatnonzero(~started | (missed >= rules.lost_after))
     free = [j for j in range(centres.shape[0]) if not used[j]]
     if lost.size == 0 or not free:
@@ -136,10 +138,18 @@ def recovery(centres: np.ndarray, used: np.ndarray, predicted: np.ndarray,
         return bool(started[robot] or moved[robot])
 
     pairs = []
+    speed = rules.top_speed_m_s * scan_s  # m a scan
     for robot in np.flatnonzero(started & (missed > 0)).tolist():
-        reach = rules.reach_m + rules.growth_m * float(missed[robot])
+        grown = rules.reach_m + rules.growth_m * float(missed[robot])
         for j in free:
             d = float(np.hypot(*(centres[j] - predicted[robot])))
+            # A moving blob for a robot whose wheels stood (they may have failed) only as
+            # far as the robot can have driven since it was lost: further off, it is
+            # someone walking past a robot that stands hidden (one carried off and set
+            # down stands still, or drives). Known once the top speed is (the lab's).
+            reach = grown
+            if (speed and still is not None and not still[j] and not moved[robot]):
+                reach = min(grown, rules.reach_m + speed * float(missed[robot]))
             if d <= reach and fits(robot, j):
                 pairs.append((d, robot, j))
     out: list[tuple[int, int]] = []

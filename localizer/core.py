@@ -284,7 +284,8 @@ class Localizer:
                            self._scan_s) if r.top_speed_m_s > 0 and self._scan_s > 0
                 else None)
         for robot, j in recovery(centres, used, self.mean_positions(), self.started,
-                                 self.missed, still, moved, self.rules, fast):
+                                 self.missed, still, moved, self.rules, fast,
+                                 self._scan_s):
             self.reseed(robot, centres[j])
 
     # output ----------------------------------------------------------------------
