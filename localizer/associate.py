@@ -117,9 +117,9 @@ def recovery(centres: np.ndarray, used: np.ndarray, predicted: np.ndarray,
     whose odometry drove: a blob that stood still is no robot that drove, and one that
     moved is no robot never seeded whose wheels stood (one parked, waiting to join). A
     robot with a pose may take a moving blob though its odometry stood (its wheels may
-    be what failed), but with ``top_speed_m_s`` set only as far as it can have driven
-    since (``scan_s`` the time between scans); and none takes one ``fast`` marks (faster
-    than a robot drives)."""
+    be what failed), but with ``top_speed_m_s`` set only within what it can drive in
+    ``lost_after`` scans of its reach (``scan_s`` the time between scans); and none takes
+    one ``fast`` marks (faster than a robot drives)."""
     lost = np.flatnonzero(~started | (missed >= rules.lost_after))
     free = [j for j in range(centres.shape[0]) if not used[j]]
     if lost.size == 0 or not free:
@@ -143,13 +143,14 @@ def recovery(centres: np.ndarray, used: np.ndarray, predicted: np.ndarray,
         grown = rules.reach_m + rules.growth_m * float(missed[robot])
         for j in free:
             d = float(np.hypot(*(centres[j] - predicted[robot])))
-            # A moving blob for a robot whose wheels stood (they may have failed) only as
-            # far as the robot can have driven since it was lost: further off, it is
-            # someone walking past a robot that stands hidden (one carried off and set
-            # down stands still, or drives). Known once the top speed is (the lab's).
+            # A moving blob for a robot whose wheels stood only near its prediction: one
+            # whose wheels failed drives out of its gate in view and is re-seeded within
+            # the scans that take (``lost_after``), at most at its top speed. Further
+            # off it is someone walking past a robot that stands hidden (a robot carried
+            # off and set down stands still, or drives). Known once the top speed is.
             reach = grown
             if (speed and still is not None and not still[j] and not moved[robot]):
-                reach = min(grown, rules.reach_m + speed * float(missed[robot]))
+                reach = min(grown, rules.reach_m + speed * rules.lost_after)
             if d <= reach and fits(robot, j):
                 pairs.append((d, robot, j))
     out: list[tuple[int, int]] = []

@@ -290,16 +290,17 @@ def test_a_blob_faster_than_a_robot_drives_re_seeds_no_lost_robot() -> None:
 
 
 def test_a_hidden_robot_that_stands_takes_no_moving_blob_beyond_its_drive() -> None:
-    """In the lab suite a robot stood hidden at the deep end of its leg for 2 s while
+    """In the lab suite a robot stood hidden at the deep end of its leg for 4 s while
     the person turned round 1.9 m away, slowly: it took the person's legs. A moving blob
-    is a robot whose wheels stood (failed wheels) only as far as it could have driven
-    since it was lost; a blob that stands still there may be it (carried off, set down)."""
+    is a robot whose wheels stood (failed wheels) only near its prediction, as far as it
+    drives in the scans it takes to be lost; a blob that stands still may be it (carried
+    off, set down)."""
     from localizer.associate import Recovery, recovery
 
     rules = Recovery(top_speed_m_s=0.6)
     centres = np.array([[-0.1, -0.3]])
     predicted = np.array([[0.08, 1.57]])  # 1.9 m off
-    args = (np.zeros(1, dtype=bool), predicted, np.array([True]), np.array([19]))
+    args = (np.zeros(1, dtype=bool), predicted, np.array([True]), np.array([39]))
     moving, standing = np.array([False]), np.array([True])
     odometry_stood = np.array([False])
     assert recovery(centres, *args, moving, odometry_stood, rules, None, 0.1) == []
