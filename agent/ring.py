@@ -74,9 +74,10 @@ def ring_join_arc(lower: SegmentView | None, upper: SegmentView | None, length: 
     heard one's end on its side (the half of its arc next to the unheard robot).
 
     ``same``: one robot is both neighbours (it is the only other one): the claim is the
-    upper third of its arc, and the two halfway meetings leave the joiner a sixth of the
-    ring when that robot owned all of it (from the middle, the claim's lower end would
-    lie half a turn from that robot's upper end, where no one can tell the turns)."""
+    upper third of its arc, and the two halfway meetings would leave the joiner a sixth
+    of the ring when that robot owned all of it (from the middle, the claim's lower end
+    would lie half a turn from that robot's upper end, where no one can tell the
+    turns); the workload law moves the boundaries from there."""
     if lower is None and upper is None:
         raise ValueError("a join round a ring needs a neighbour heard (else: initial_arc)")
     if same:
