@@ -3,7 +3,8 @@ runs four agents round a floe, SIGKILLs robot 1 and starts it again; from the
 recording, the live robots' arcs tile the whole contour (no gap, no overlap) within a
 second of simulated time after each fault is noticed, the restarted robot gets an arc
 back between its two neighbours, and the workload balances again within ten patrol
-cycles."""
+cycles. And three robots of which two die and come back: a ring of two, then one robot
+owning the whole contour."""
 
 from __future__ import annotations
 
@@ -107,3 +108,33 @@ def test_the_workload_balances_again_within_ten_cycles(kill_and_restart: Path) -
         assert fault["rebalanced_s"] < 10 * cycle, (fault, cycle)
     text = (kill_and_restart / "report.md").read_text()
     assert "## Faults" in text and "kill agent 1" in text
+
+
+def test_two_left_share_the_ring_and_one_alone_owns_it(tmp_path: Path) -> None:
+    """Three robots: robot 1 dies (robots 0 and 2 are each other's neighbour on both
+    sides), then robot 2 (robot 0 alone owns the whole contour); both come back."""
+    out = tmp_path / "run"
+    sim = run_sim(out, "--map", FLOE, "--robots", "3", "--localization", "truth",
+                  "--duration", "110", "--fault", "kill:1@20", "--fault", "kill:2@40",
+                  "--fault", "restart:1@60", "--fault", "restart:2@80", "--no-report")
+    assert sim.returncode == 0, sim.stderr[-3000:]
+    run = load_run(out)
+    length = float(run.info["edge_hi"]) - float(run.info["edge_lo"])
+    s0, s1, s2 = run.states[0], run.states[1], run.states[2]
+    two = (s0.t > 21.0) & (s0.t < 40.0)
+    assert two.any() and (s0.lower[two] == 2).all() and (s0.upper[two] == 2).all()
+    alone = (s0.t > 41.0) & (s0.t < 60.0)
+    assert alone.any() and (s0.lower[alone] == -1).all() and (s0.upper[alone] == -1).all()
+    assert np.allclose(s0.hi[alone] - s0.lo[alone], length, atol=1e-9)
+    # robot 1 comes back into a ring of two: a share of robot 0's arc, never all of it
+    first = np.flatnonzero(s1.t > 60.0)[0]
+    assert (s1.lower[first], s1.upper[first]) == (0, 0)
+    assert 0.15 <= s1.hi[first] - s1.lo[first] < 0.5 * length
+    # the three arcs tile the ring at the end, each robot's upper end its upper
+    # neighbour's lower end in whole turns
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        turns = (run.states[i].hi[-1] - run.states[j].lo[-1]) / length
+        assert turns == pytest.approx(round(turns), abs=1e-9), (i, j)
+    assert sum(run.states[i].hi[-1] - run.states[i].lo[-1] for i in range(3)) == (
+        pytest.approx(length, abs=1e-9))
+    assert s2.t[-1] == pytest.approx(109.9)
