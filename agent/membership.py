@@ -26,7 +26,10 @@ On a ring (a closed edge, ``ring=True``) the ids wrap: the neighbours are the ne
 live ids below and above round the ring (agent.ring.ring_neighbours: robot 0's lower one
 is the highest live id), both always exist while anyone else is live, the candidates
 are counted round the ring too, and the first arcs are equal arcs of the ring from
-s = 0. The chain's answers are unchanged.
+s = 0; a robot joining a running ring claims from the middle of its lower neighbour's
+arc to the middle of its upper one's (agent.ring.ring_join_arc). With one other robot
+live it is the neighbour on both sides; alone, a robot has none (None, None) and owns
+the whole contour (agent.ringcontrol). The chain's answers are unchanged.
 """
 
 from __future__ import annotations
@@ -36,7 +39,7 @@ from typing import Generic, Protocol, TypeVar
 
 from agent.controller import initial_segment
 from agent.partition import SegmentView, join_segment
-from agent.ring import initial_arc, ring_neighbours
+from agent.ring import initial_arc, ring_join_arc, ring_neighbours
 
 HISTORY = 8  # neighbour states kept per neighbour, by tick
 # Ids listened to on each side, nearest first, in the gap to the neighbour on that side
@@ -329,15 +332,16 @@ class Membership(Generic[S]):
     def first_segment(self, k: int, edge_lo: float, edge_hi: float) -> tuple[float, float]:
         """The segment to claim on acting first, at tick ``k``: equal initial segments
         when the team starts together (tick 0, or no neighbour heard); otherwise a share
-        of the live neighbours' latest segments (``join_segment``), never past a live
-        neighbour not heard yet."""
+        of the live neighbours' latest segments (``join_segment``; round a ring
+        ``ring_join_arc``), never past a live neighbour not heard yet."""
         lower_id, upper_id = self.neighbours()
         views = [self.latest_segment(rid, k) for rid in (lower_id, upper_id)]
         if self.ring and (k == 0 or all(v is None for v in views)):
             lo, hi = initial_arc(self.robot, self.team, edge_hi - edge_lo)
             return edge_lo + lo, edge_lo + hi
         if self.ring:
-            raise NotImplementedError("joining a running ring is not built yet")
+            return ring_join_arc(views[0], views[1], edge_hi - edge_lo,
+                                 same=lower_id == upper_id)
         if k == 0 or all(v is None for v in views):
             return initial_segment(self.robot, self.team, edge_lo, edge_hi)
         return join_segment(views[0], views[1], edge_lo, edge_hi,

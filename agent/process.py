@@ -464,11 +464,13 @@ class AgentNode:
                     self.gains, self.patrol_cfg, self.limits,
                 )
         lower_id, upper_id = self.membership.neighbours()
-        out = self.controller.step(
-            sense.dt, pose.x, pose.y, pose.theta, sense.ice, sense.algae,
-            self._neighbour_view(lower_id, k), self._neighbour_view(upper_id, k),
-            lower_id is not None, upper_id is not None,
-        )
+        views = (sense.dt, pose.x, pose.y, pose.theta, sense.ice, sense.algae,
+                 self._neighbour_view(lower_id, k), self._neighbour_view(upper_id, k),
+                 lower_id is not None, upper_id is not None)
+        if isinstance(self.controller, RingController):  # its neighbours round the ring
+            out = self.controller.step(*views, ids=(lower_id, upper_id))
+        else:
+            out = self.controller.step(*views)
         me = self.controller.published
         assert me is not None
         state = AgentState(

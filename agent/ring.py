@@ -61,6 +61,41 @@ def initial_arc(robot: int, team: int, length: float) -> tuple[float, float]:
     return robot * length / team, (robot + 1) * length / team
 
 
+def ring_join_arc(lower: SegmentView | None, upper: SegmentView | None, length: float,
+                  same: bool = False) -> tuple[float, float]:
+    """The first claim of a robot that joins a running ring (a restart, or a new id)
+    between its live neighbours, whose latest arcs are ``lower`` and ``upper`` (None: not
+    heard yet), in the lower one's frame: the chain's rule (agent.partition.join_segment)
+    round the ring, from the middle of the lower neighbour's arc to the middle of the
+    upper one's, the upper's moved into that frame by the whole turns the gap between
+    them tells (its lo nearest the lower's hi: right while the gap is under half the
+    ring). Each neighbour then meets it halfway, so it starts with a quarter of each one's
+    arc. A ring has no ends: a neighbour not heard is live, and the claim stops at the
+    heard one's end on its side (the half of its arc next to the unheard robot).
+
+    ``same``: one robot is both neighbours (it is the only other one): the claim is the
+    upper third of its arc, and the two halfway meetings would leave the joiner a sixth
+    of the ring when that robot owned all of it (from the middle, the claim's lower end
+    would lie half a turn from that robot's upper end, where no one can tell the
+    turns); the workload law moves the boundaries from there."""
+    if lower is None and upper is None:
+        raise ValueError("a join round a ring needs a neighbour heard (else: initial_arc)")
+    if same:
+        view = lower if lower is not None else upper
+        assert view is not None
+        return view.hi - (view.hi - view.lo) / 3.0, view.hi
+    if lower is None:
+        assert upper is not None
+        return upper.lo, 0.5 * (upper.lo + upper.hi)
+    if upper is None:
+        return 0.5 * (lower.lo + lower.hi), lower.hi
+    lo = 0.5 * (lower.lo + lower.hi)
+    hi = 0.5 * (upper.lo + upper.hi) + frame_shift(upper.lo, lower.hi, length)
+    if not lo < hi:  # claims out of order: split what lies between them
+        lo, hi = hi, lo
+    return lo, min(hi, lo + length)
+
+
 def ring_update(boundaries: Sequence[float], workloads: Sequence[float], length: float,
                 k_s: float, min_len: float) -> list[float]:
     """One step of eq. 4.3 for the whole ring (reference and tests): robot i's arc is

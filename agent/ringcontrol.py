@@ -66,6 +66,10 @@ class RingController(Controller):
         self.edge_coordinates = (s, -1.0, 0.0)  # the last pose in the frame: s, d, psi
         # a neighbour's depths moved into this frame, kept while it publishes the same
         self._moved: dict[int, tuple[object, int, tuple[tuple[int, float], ...]]] = {}
+        # the ids of the neighbours on each side, from membership (``step``'s ``ids``);
+        # (i -+ 1) mod n until told otherwise, None on both sides for a robot alone
+        self.neighbour_ids: tuple[int | None, int | None] = (
+            (robot - 1) % team, (robot + 1) % team)
         super().__init__(robot, lo, hi, lo, hi, self._unwrapped(s, lo, hi), gains, patrol,
                          limits, ring_length=edge.length)
 
@@ -74,13 +78,10 @@ class RingController(Controller):
         return s + frame_shift(s, 0.5 * (lo + hi), self.length)
 
     # the ring's neighbours ------------------------------------------------------------
-    def _ids(self) -> tuple[int, int]:
-        return (self.robot - 1) % self.team, (self.robot + 1) % self.team
-
     def _shift_of(self, nb: Neighbour) -> float:
         """The whole turns that put neighbour ``nb``'s values in this robot's frame, from
         the boundary the two share (with two robots, the nearer of its two)."""
-        lower_id, upper_id = self._ids()
+        lower_id, upper_id = self.neighbour_ids
         me_lo, me_hi = self.lo, self.hi
         if nb.robot == lower_id and nb.robot == upper_id:  # a ring of two
             by_lo = frame_shift(nb.hi, me_lo, self.length)
@@ -104,16 +105,23 @@ class RingController(Controller):
 
     def _chain_sides(self, lower: Neighbour | None, upper: Neighbour | None,
                      has_lower: bool, has_upper: bool) -> tuple[bool, bool]:
-        lower_id = lower.robot if lower is not None else self._ids()[0]
-        upper_id = upper.robot if upper is not None else self._ids()[1]
+        lower_id = lower.robot if lower is not None else self.neighbour_ids[0]
+        upper_id = upper.robot if upper is not None else self.neighbour_ids[1]
+        if lower_id is None or upper_id is None:  # alone: no chain to agree on
+            return False, False
         below, above = chain_sides(self.robot, lower_id, upper_id)
         return has_lower and below, has_upper and above
 
     def _update_boundaries(self, lower: Neighbour | None, upper: Neighbour | None,
                            has_lower: bool, has_upper: bool) -> None:
         """eq. 4.3 on both ends, each in the lower robot's frame (agent.ring). On a ring
-        there are no ends of the edge: a side not heard yet keeps its boundary."""
+        there are no ends of the edge: a side not heard yet keeps its boundary, and a
+        robot with no neighbour on either side (alone on the ring) owns the whole contour
+        from its lo."""
         g, me = self.gains, self.published
+        if not has_lower and not has_upper:
+            self.hi = self.lo + self.length
+            return
         if me is None:
             return
         mine = SegmentView(me.lo, me.hi, me.workload)
@@ -151,8 +159,14 @@ class RingController(Controller):
         upper: Neighbour | None,
         has_lower: bool = True,
         has_upper: bool = True,
+        ids: tuple[int | None, int | None] | None = None,
     ) -> Output:
-        """One control tick from the robot's world pose; the command is the world's."""
+        """One control tick from the robot's world pose; the command is the world's.
+        ``ids``: the neighbours' ids on each side from membership (the nearest live ids
+        round the ring; one robot on both sides in a ring of two; None, None alone);
+        without it, those the robot was told last."""
+        if ids is not None:
+            self.neighbour_ids = ids
         s, d, psi = self.edge_pose(x, y, theta)
         out = super().step(dt, s, d, psi, ice, algae, lower, upper, has_lower, has_upper)
         omega = self.frame.world_omega(out.v, out.omega, s, d, psi)

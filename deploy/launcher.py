@@ -332,12 +332,11 @@ def ring_refusal(args: argparse.Namespace) -> str | None:
     if args.localization not in (None, "truth"):
         return (f"--localization {args.localization}: a ring on a closed edge runs with truth "
                 "poses only, so far (the laser's view round a floe is later work)")
-    given = [flag for flag, value in (("--fault", args.fault), ("--chaos", args.chaos),
-                                      ("--sensors lab", args.sensors == "lab"),
+    given = [flag for flag, value in (("--sensors lab", args.sensors == "lab"),
                                       ("--hil", args.hil)) if value]
     if given:
-        return (f"{', '.join(given)}: not on a ring round a closed edge yet (faults on a "
-                "ring, the lab's sensors and the hardware loop round a floe are later work)")
+        return (f"{', '.join(given)}: not on a ring round a closed edge yet (the lab's "
+                "sensors and the hardware loop round a floe are later work)")
     return None
 
 

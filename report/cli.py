@@ -308,6 +308,7 @@ def ring_report(run_dir: Path, run: Any) -> dict[str, Any]:
         contour_edge,
         ring_edge_of,
         ring_errors,
+        ring_faults,
         ring_figures,
         ring_measures,
         ring_tracks,
@@ -326,6 +327,7 @@ def ring_report(run_dir: Path, run: Any) -> dict[str, Any]:
     tr = tracks
     result = ring_measures(t, tr.s, tr.d, tr.lo, tr.hi, tr.direction, tr.phase, tr.workload,
                            ring)
+    faults = ring_faults(run, t, tr, ring, m.WORKLOAD_BAND_M2, m.CONVERGE_SMOOTH_S)
     summary: dict[str, Any] = {
         **{k: info.get(k) for k in ("map", "start", "robots", "localization", "seed",
                                     "duration_s", "odom_noise", "odom_turn_noise")},
@@ -338,6 +340,11 @@ def ring_report(run_dir: Path, run: Any) -> dict[str, Any]:
         "rejected_messages": rejected_messages(run),
         "refused": run.refused,
         "positions_from": run.positions_from,
+        # the contour owned by no live robot, integrated over the run (m s), and each
+        # fault's measures as a chain's (report.faults), round the ring
+        "coverage_gap_m_s": float(np.sum(np.nan_to_num(faults.gap[:-1]) * np.diff(t)))
+        if t.size > 1 else 0.0,
+        "faults": faults.faults,
         # every robot's arc [lo, hi] in its own frame at the run's last tick
         "arcs_end": [[float(tr.lo[j, -1]), float(tr.hi[j, -1])] for j in range(len(tr.ids))],
     }
@@ -358,6 +365,7 @@ def ring_report(run_dir: Path, run: Any) -> dict[str, Any]:
               "along the contour, revisit times of points every 0.1 m round it against "
               "L / (n v), the optimum of a patrolled cycle (each robot sweeping its own arc "
               "to and fro reaches 2 L / (n v) at best).", "", *goals_markdown(summary),
+              *faults_markdown(summary["faults"]).splitlines(),
               "![map](map.png)", "", "![errors](errors.png)", ""]
     (run_dir / "report.md").write_text("\n".join(lines))
     return summary

@@ -26,6 +26,7 @@ from agent.edgeframe import ClosedEdge
 from agent.phase import position_to_phase_array as position_phase
 from agent.phase import wrap_pi_array as wrap_pi
 from agent.ring import frame_shift
+from report.load import RunData
 from report.measures import (
     POINT_STEP_M,
     VISIT_MERGE_S,
@@ -287,3 +288,78 @@ def ring_figures(gmap: object, t: np.ndarray, x: np.ndarray, y: np.ndarray,
     fig.savefig(out / "errors.png", dpi=110)
     plt.close(fig)
     return ["map.png", "errors.png"]
+
+
+def ring_union(lo: np.ndarray, hi: np.ndarray, length: float) -> tuple[float, float]:
+    """Length of the ring covered by no arc, and the length covered more than once, of
+    arcs [lo, hi] each in its own frame of s (NaN: no arc): each is put in [0, L) by
+    whole turns, the part past L wrapped to the start."""
+    ok = np.isfinite(lo) & np.isfinite(hi) & (hi > lo)
+    lo, hi = lo[ok], hi[ok]
+    start = np.mod(lo, length)
+    end = start + np.minimum(hi - lo, length)
+    pieces = [(a, min(b, length)) for a, b in zip(start, end, strict=True)]
+    pieces += [(0.0, b - length) for b in end if b > length]
+    covered, reach = 0.0, 0.0
+    for a, b in sorted(pieces):
+        if b > reach:
+            covered += b - max(a, reach)
+            reach = b
+    total = float(np.sum(hi - lo))
+    return length - covered, max(0.0, total - covered)
+
+
+def ring_coverage(lo: np.ndarray, hi: np.ndarray, live: np.ndarray, length: float
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Gap and overlap (m) round the ring of the live robots' arcs at each sample; the
+    arrays (robots, samples), ``live`` which robot is in the team then."""
+    ticks = lo.shape[1]
+    gap, overlap = np.full(ticks, np.nan), np.full(ticks, np.nan)
+    for k in range(ticks):
+        if live[:, k].any():
+            gap[k], overlap[k] = ring_union(lo[live[:, k], k], hi[live[:, k], k], length)
+    return gap, overlap
+
+
+def live_ring_workload_errors(lo: np.ndarray, hi: np.ndarray, live: np.ndarray,
+                              edge: RingEdge) -> np.ndarray:
+    """The true workload error of every pair of live neighbours round the ring at each
+    sample, (robots, samples), NaN-padded: the pairs change as robots leave and come
+    back (robot ids[j] and the next live id round the ring; none with one robot, one
+    pair with two)."""
+    work = edge.workload(np.nan_to_num(lo), np.nan_to_num(hi))
+    out = np.full(lo.shape, np.nan)
+    for k in range(lo.shape[1]):
+        ids = np.flatnonzero(live[:, k])
+        for row, (a, b) in enumerate(ring_pairs(ids.size)):
+            out[row, k] = work[ids[b], k] - work[ids[a], k]
+    return out
+
+
+@dataclass(frozen=True)
+class RingFaults:
+    """A ring's run with faults, on its time grid: the gap and overlap round the ring of
+    the live robots' arcs, and one object per fault as ``report.faults.fault_measures``
+    gives a chain's (when noticed, the contour unowned meanwhile, when rebalanced)."""
+
+    gap: np.ndarray
+    overlap: np.ndarray
+    faults: list[dict[str, object]]
+
+
+def ring_faults(run: RunData, t: np.ndarray, tracks: RingTracks, edge: RingEdge,
+                band: float, smooth_s: float) -> RingFaults:
+    """Fault measures of a recorded ring: a robot is live while it is in the world's live
+    list with a recent state (``report.series.live_matrix``); the workload error is that
+    of the live neighbours round the ring (``live_ring_workload_errors``)."""
+    from report.faults import fault_measures
+    from report.series import live_matrix
+
+    live = live_matrix(run, t, tracks.ids)
+    gap, overlap = ring_coverage(tracks.lo, tracks.hi, live, edge.length)
+    work = live_ring_workload_errors(tracks.lo, tracks.hi, live, edge)
+    unknown = np.full(work.shape, np.nan)
+    series = TeamErrors(t=t, pairs=[], phase=unknown, phase_path=unknown, workload=work,
+                        workload_agents=unknown, phase_agents=unknown, ids=tracks.ids,
+                        live=live)
+    return RingFaults(gap, overlap, fault_measures(run, series, gap, band, smooth_s))

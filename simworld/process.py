@@ -314,9 +314,13 @@ class WorldProcess(WorldShell):
                 ranges = laser.scan([(x, y) for x, y, _ in truth])
             self.pub_scan.put(encode(Scan(t, k, ranges, s.x, s.y, s.theta, s.angle_min,
                                           s.angle_step, s.range_max, j, len(self.lasers))))
-        for i, until in list(self.booting.items()):
-            if t >= until - 1e-9:
-                del self.booting[i]
+        booted = [i for i, until in self.booting.items() if t >= until - 1e-9]
+        for i in booted:
+            del self.booting[i]
+        if booted and closed:
+            # a ring's agent takes its edge frame from the contour: one that has just
+            # started gets it with its first sensing, not up to INFO_EVERY_TICKS later
+            self.publish_info()
         for i in range(self.n):
             if i in self.booting:
                 continue  # still starting: no sensing yet
