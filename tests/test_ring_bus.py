@@ -121,8 +121,12 @@ def test_a_forged_ring_state_is_refused_and_changes_nothing(tmp_path: Path) -> N
     summary = json.loads((out / "summary.json").read_text())
     refused = summary["refused"]
     # both neighbours refuse the arc a quarter of a turn out at both ends, the bin across
-    # the ring and the open edge's state; every agent and the recorder the second contour
-    assert refused["agents_rejected"] == {"0": 4, "1": 1, "2": 4}
+    # the ring and the open edge's state; every agent and the recorder the second contour.
+    # (On a loaded host the forger can hear its tick late, and its first lie, for two
+    # ticks on, then reaches the neighbours after their 8 ticks of their own claims: it
+    # is dropped unjudged, acted on by nobody. So 3 or 4; robot 1 refuses the contour.)
+    rejected = refused["agents_rejected"]
+    assert rejected["1"] == 1 and rejected["0"] in (3, 4) and rejected["2"] in (3, 4), rejected
     assert refused["recorder_rejected"] == {"world/info": 1, "agent/1/state": 1}
     # the lies changed nothing: the clean run, bit for bit (unless a loaded machine made
     # the world step without a command, past --cmd-timeout: then the runs differ by timing)
