@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -54,9 +55,10 @@ class GridMap:
     _algae_m: np.ndarray = field(init=False, repr=False)  # algae extent above the local edge
     _y0: float = field(init=False, repr=False)  # y of the bottom of row 0
     _closed_edge: ClosedEdge | None = field(init=False, repr=False, default=None)
-    # the bins of patrol_depth_bins and edge_y_bins by width: the map does not change, and
-    # the world tells them every INFO_EVERY_TICKS (0.15 s each on a 30 m edge's cells)
-    _bins: dict[tuple[str, float], tuple[float, ...]] = field(
+    # the bins of patrol_depth_bins, edge_y_bins and ring_patrol_depth_bins by their
+    # arguments (``_kept``): the map does not change, and the world tells them every
+    # INFO_EVERY_TICKS (about 75 ms on a 30 m edge's cells, 0.1 s round a floe)
+    _bins: dict[tuple[object, ...], tuple[float, ...]] = field(
         init=False, repr=False, default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -95,9 +97,16 @@ class GridMap:
     def ring_patrol_depth_bins(self, bins: int, max_depth_m: float = 3.0) -> list[float]:
         """True patrol depth per bin of ``bins`` equal bins of the closed contour from
         s = 0: max(min_depth, the algae's depth along the inward normal)."""
-        depth = normal_depths(self.closed_edge, self.ice, self.algae, self.cell_m, self._y0,
-                              bins, max_depth_m)
-        return [round(float(max(self.min_depth, d)), 9) for d in depth]
+        return self._kept(("ring", bins, max_depth_m), lambda: [
+            round(float(max(self.min_depth, d)), 9)
+            for d in normal_depths(self.closed_edge, self.ice, self.algae, self.cell_m,
+                                   self._y0, bins, max_depth_m)])
+
+    def _kept(self, key: tuple[object, ...], make: Callable[[], list[float]]) -> list[float]:
+        """``make()``'s bins, worked out once for ``key``; a copy of them each time."""
+        if key not in self._bins:
+            self._bins[key] = tuple(make())
+        return list(self._bins[key])
 
     def check_ring_room(self, where: str = "") -> None:
         """Refuse an island without ROBOT_ROOM_M + LASER_ROOM_M of water between it and
@@ -216,10 +225,8 @@ class GridMap:
         algae's extent per column to take instead of the map's own (a map that
         changes, ``simworld.change``)."""
         if algae_m is None:
-            key = ("depth", bin_m)
-            if key not in self._bins:
-                self._bins[key] = tuple(self.patrol_depth_bins(bin_m, self._algae_m))
-            return list(self._bins[key])
+            return self._kept(("depth", bin_m),
+                              lambda: self.patrol_depth_bins(bin_m, self._algae_m))
         lo, hi = self.edge_lo, self.edge_hi
         n_bins = max(1, math.ceil((hi - lo) / bin_m - 1e-9))
         extent = algae_m
@@ -241,10 +248,7 @@ class GridMap:
         """The local edge's y per bin of width ``bin_m`` over [edge_lo, edge_hi] (the bins
         of ``patrol_depth_bins``): the mean over the cell columns holding ice whose
         centres fall in the bin."""
-        key = ("edge", bin_m)
-        if key not in self._bins:
-            self._bins[key] = tuple(self._edge_y_bins(bin_m))
-        return list(self._bins[key])
+        return self._kept(("edge", bin_m), lambda: self._edge_y_bins(bin_m))
 
     def _edge_y_bins(self, bin_m: float) -> list[float]:
         lo, hi = self.edge_lo, self.edge_hi

@@ -295,3 +295,10 @@ def test_a_maps_bins_are_kept_and_a_caller_cannot_change_them():
     depth[0] = edge[0] = 99.0
     assert gmap.patrol_depth_bins(0.1)[0] != 99.0 and gmap.edge_y_bins(0.1)[0] != 99.0
     assert len(gmap.patrol_depth_bins(0.05)) == 2 * len(gmap.patrol_depth_bins(0.1))
+    floe = load_map("floe:1,shape=round,size=2.5,algae=blooms", 0.05, 1)
+    ring = floe.ring_patrol_depth_bins(300)
+    ring[0] = 99.0
+    again = floe.ring_patrol_depth_bins(300)
+    assert again[0] != 99.0 and len(again) == 300
+    assert again == load_map("floe:1,shape=round,size=2.5,algae=blooms", 0.05,
+                             1).ring_patrol_depth_bins(300)
