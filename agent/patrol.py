@@ -565,9 +565,8 @@ class Patrol:
         change past it (``sensor_latency_s``, ``sensor_band_m``; none by default)."""
         if prev_y is None:
             return y
-        mid = 0.5 * (prev_y + y)
-        lag = self._lag(y, prev_y, dt)
-        return mid - lag if lag else mid
+        # (less a lag of 0.0, the default's, is the middle itself, bit for bit)
+        return 0.5 * (prev_y + y) - self._lag(y, prev_y, dt)
 
     def _lag(self, y: float, prev_y: float | None, dt: float | None) -> float:
         """How far past where it changed (along y, signed as the robot went) a reading
@@ -580,7 +579,7 @@ class Patrol:
         return late + math.copysign(0.5 * c.sensor_band_m, step)
 
     def _measure_on_the_way_out(self, x: float, y: float, prev_y: float | None,
-                                ice: bool, algae: bool, dt: float | None = None) -> None:
+                                ice: bool, algae: bool, dt: float | None) -> None:
         """The out leg samples the depth profile too, on its own pass line: coming out
         from the turn depth, algae first seen marks the extent there (from the ice edge
         the in-legs found); algae from the start only bounds it from below, and then
@@ -622,10 +621,7 @@ class Patrol:
         edge = self.depth_map.edge_y(self.x)
         if edge is not None:
             measured += leg.entry_y - edge
-        lag = self._lag(y, prev_y, dt)
-        if lag:
-            measured -= lag
-        return max(c.min_depth_m, measured)
+        return max(c.min_depth_m, measured - self._lag(y, prev_y, dt))
 
     def _algae_top(self, depth: float, prev_y: float | None, y: float,
                    dt: float | None) -> float | None:
@@ -637,9 +633,7 @@ class Patrol:
                 or leg.algae_depth < c.min_depth_m or leg.entry_y is None
                 or self.depth_map.edge_y(self.x) is None):
             return None
-        top = leg.entry_y + 0.5 * (leg.algae_depth + depth)
-        lag = self._lag(y, prev_y, dt)
-        return top - lag if lag else top
+        return leg.entry_y + 0.5 * (leg.algae_depth + depth) - self._lag(y, prev_y, dt)
 
     def step(self, x: float, y: float, theta: float, ice: bool, algae: bool,
              lo: float, hi: float, team: TeamInput = NO_TEAM) -> Steer:

@@ -258,11 +258,10 @@ class AgentNode:
     def _take_contour(self) -> None:
         """Build the edge frame from the contour heard, once the sensing has said the
         edge is closed and how long it is; a contour that does not fit is dropped."""
-        if self.ring_edge is not None or self.contour is None or not self.senses:
+        if (self.ring_edge is not None or self.contour is None or not self.senses
+                or not self.closed):
             return
         sense = self.senses[max(self.senses)]
-        if not self.closed:
-            return
         c = self.contour
         try:
             edge = ClosedEdge(list(zip(c[0::2], c[1::2], strict=True)))
@@ -352,20 +351,17 @@ class AgentNode:
                 self._judge(key, state)
 
     def _bounds(self, sense: Sense) -> plausible.Bounds:
-        p = self.patrol_cfg
+        p, g = self.patrol_cfg, self.gains
         edge = sense.edge_hi - sense.edge_lo
-        if sense.closed:  # a ring's depth map: a whole number of bins make the ring
-            return plausible.Bounds(
-                sense.edge_lo, sense.edge_hi,
-                depth_max=p.max_depth_m + p.margin_out_m + p.max_search_m,
-                bin_m=ring_bins(edge, p.bin_m),
-                max_passes=passes_for(edge, p.max_spacing_m, p.passes_per_sweep),
-                closed=True, reach_m=self.gains.shared_reach_m,
-                reach_fraction=self.gains.shared_reach_fraction)
         return plausible.Bounds(
             sense.edge_lo, sense.edge_hi,
-            depth_max=p.max_depth_m + p.margin_out_m + p.max_search_m, bin_m=p.bin_m,
-            max_passes=passes_for(edge, p.max_spacing_m, p.passes_per_sweep))
+            depth_max=p.max_depth_m + p.margin_out_m + p.max_search_m,
+            # a ring's depth map: a whole number of bins make the ring
+            bin_m=ring_bins(edge, p.bin_m) if sense.closed else p.bin_m,
+            max_passes=passes_for(edge, p.max_spacing_m, p.passes_per_sweep),
+            # (the reach of a sender's bins is judged on a ring only)
+            closed=sense.closed, reach_m=g.shared_reach_m,
+            reach_fraction=g.shared_reach_fraction)
 
     def _neighbour_view(self, rid: int | None, k: int) -> Neighbour | None:
         """The neighbour's state of tick k-1 (or the latest before k if that is missing)."""
