@@ -13,6 +13,7 @@ import time
 import uuid
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import zenoh
 
@@ -116,6 +117,24 @@ def wait_for(cond: Callable[[], bool], timeout: float, what: str) -> None:
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out after {timeout} s waiting for {what}")
         time.sleep(0.02)
+
+
+def open_when_accepted(conf: dict[str, Any], router: subprocess.Popen[bytes],
+                       log: Path, timeout: float, what: str) -> zenoh.Session:
+    """A session of ``conf`` (a Zenoh configuration), opened once the router accepts it
+    (an mTLS router refuses a client until it listens); the router's log if it died."""
+    opened: list[zenoh.Session] = []
+
+    def joins() -> bool:
+        assert router.poll() is None, log.read_text()[-2000:]
+        try:
+            opened.append(zenoh.open(zenoh.Config.from_json5(json.dumps(conf))))
+        except zenoh.ZError:
+            return False
+        return True
+
+    wait_for(joins, timeout, what)
+    return opened[0]
 
 
 def wait_port(port: int, timeout_s: float = 60.0) -> None:

@@ -60,7 +60,7 @@ from hwbridge.hil_world import laser_pose
 from simworld.maps import load_map
 from simworld.world import World
 from tests import netns
-from tests.procutil import unique_ns, wait_for
+from tests.procutil import open_when_accepted, unique_ns, wait_for
 from tests.unitfiles import environment, exec_argv, host_files
 from wire import AgentState, Cmd, Keys, Sense, Tick, decode
 
@@ -264,19 +264,9 @@ dir = "{self.tls}"
         """The operator's laptop: the recorder's rights (it hears everything and puts
         nothing) over the management link, once the router accepts it."""
         conf = client_config(self.fleet, "recorder", host=self.site.mgmt_addr)
-        opened: list[zenoh.Session] = []
-
-        def joins() -> bool:
-            router = self.procs["router"]
-            assert router.poll() is None, (self.site.logs / "router.log").read_text()[-2000:]
-            try:
-                opened.append(zenoh.open(zenoh.Config.from_json5(json.dumps(conf))))
-            except zenoh.ZError:
-                return False
-            return True
-
-        wait_for(joins, 60, "the router to accept the observer")
-        session, seen, keys = opened[0], self.seen, Keys(self.ns)
+        session = open_when_accepted(conf, self.procs["router"], self.site.logs / "router.log",
+                                     60, "the router to accept the observer")
+        seen, keys = self.seen, Keys(self.ns)
 
         def add(rows: list, row: tuple) -> None:
             with seen.lock:

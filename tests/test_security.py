@@ -38,7 +38,7 @@ from deploy.render import client_config, render, router_config
 from hwbridge.create import model as cm
 from hwbridge.emulators.pty import CreateEmulator, LmsEmulator
 from tests.netns import stop
-from tests.procutil import free_port, start, unique_ns, wait_for
+from tests.procutil import free_port, open_when_accepted, start, unique_ns, wait_for
 from tests.unitfiles import exec_argv, host_files
 from wire import Cmd, Keys, encode
 
@@ -156,18 +156,9 @@ class Observer:
 def open_observer(b: Bus) -> tuple[zenoh.Session, Observer]:
     """The base station's session, once the router accepts it."""
     conf = client_config(b.fleet, "recorder")  # it hears everything, and puts nothing
-    opened: list[zenoh.Session] = []
-
-    def base_station_joins() -> bool:
-        assert b.proc.poll() is None, (b.tmp / "router.log").read_text()
-        try:
-            opened.append(zenoh.open(zenoh.Config.from_json5(json.dumps(conf))))
-        except zenoh.ZError:
-            return False
-        return True
-
-    wait_for(base_station_joins, 30, "the router to accept the base station")
-    return opened[0], Observer(opened[0], b.ns)
+    session = open_when_accepted(conf, b.proc, b.tmp / "router.log", 30,
+                                 "the router to accept the base station")
+    return session, Observer(session, b.ns)
 
 
 @pytest.fixture(scope="module")
