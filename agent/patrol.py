@@ -465,6 +465,7 @@ class Patrol:
         if self._deepest[0] != key:
             values = [d for b, d in dm.depths.items() if first <= b <= last]
             values += [d for b, d in dm.shared.items() if first <= b <= last]
+            values += [d for b, d in dm.floors.items() if first <= b <= last]
             self._deepest = (key, max(values, default=self.config.min_depth_m))
         return self._deepest[1]
 
@@ -589,6 +590,9 @@ class Patrol:
         mid = self._sensed(y, prev_y, dt)
         if out.started_in_algae is None:
             out.started_in_algae = algae
+            edge = self.depth_map.edge_y(x)
+            if algae and edge is not None:  # the algae here reaches at least this deep
+                self.depth_map.floor(x, y - edge)
         if algae and out.algae_top is None:
             self.out_slow = self.was_measuring
             out.algae_top = mid

@@ -615,3 +615,45 @@ def test_late_sensors_with_a_dead_band_are_placed_back_by_what_the_agent_is_told
     assert max(map(abs, placed)) <= 0.026  # half a fast tick, and the slow one's half
     with pytest.raises(ValueError):
         PatrolConfig(sensor_latency_s=-0.01)
+
+
+def test_a_column_an_out_leg_started_in_is_at_least_that_deep():
+    """An out-leg that starts inside algae sees no end to it: the column reaches at
+    least that deep. Until it is measured the profile takes it at least that deep (not
+    as deep as its neighbours), it matters for aiming, and even legs go that deep."""
+    dm = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3)
+    for b in (0, 2):
+        dm.record(0.1 * b + 0.05, 0.3)
+    assert dm.average(0.1, 0.2) == pytest.approx(0.3)  # taken for its neighbours' depth
+    assert not dm.gap(0.0, 0.3)
+    patrol = Patrol(PatrolConfig(), dm, x=0.15)
+    dm.cross(0.15, 0.0)
+    patrol.motion = Motion.EXIT
+    patrol.step(0.15, 1.4, -math.pi / 2, True, True, 0.0, 0.3)  # algae from its start
+    assert dm.floors == {1: pytest.approx(1.4)}
+    assert dm.average(0.1, 0.2) == pytest.approx(1.4)
+    assert dm.gap(0.0, 0.3)  # a column deeper than it was taken for: aim at it
+    assert patrol.deepest(0.0, 0.3) == pytest.approx(1.4)
+    dm.floor(0.15, 1.2)  # a shallower bound says nothing new
+    assert dm.floors[1] == pytest.approx(1.4)
+    dm.record(0.15, 1.5)  # measured at last: the bound has done its work
+    assert dm.floors == {} and dm.average(0.1, 0.2) == pytest.approx(1.5)
+    dm.floor(0.15, 1.6)  # nor does a bound once the column is measured
+    assert dm.floors == {}
+
+
+def test_a_sample_measured_from_a_better_edge_does_not_look_like_a_change():
+    """Two samples of one column whose algae ended at the same place agree, however
+    far apart the edges they were first measured from: the first edge, from a single
+    crossing 15 cm high, is 15 cm off, but the map compares depths from the edge the
+    crossings give now (a static map taken for a changing one forgot most of its
+    samples)."""
+    dm = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3)
+    dm.cross(0.55, 0.15, ROUGH)
+    dm.record(0.551, 0.85, top_y=1.0)  # 0.85 from the edge it knew then
+    for _ in range(24):
+        dm.cross(0.55, 0.0)  # the edge is at 0
+    for k in range(4):
+        dm.record(0.552 + 0.001 * k, 1.0, top_y=1.0)  # 1.0 from it, the same algae
+        dm.tick(0.1, 100.0)
+    assert dm.contradicted is None and not dm.changing
