@@ -103,12 +103,20 @@ def markdown(rows: list[dict[str, Any]], settings: dict[str, Any], goals: tuple[
     return "\n".join(lines) + "\n"
 
 
+BELIEF_KEY = "workload_belief_gap_m2"
+
+
 def general_figure(rows: list[dict[str, Any]], path: Path, goals: tuple[Goal, ...]) -> None:
     """Each goal's measure against team size (left) and edge length (right), the goal's
-    bound dashed."""
-    shown = [g for g in goals if g[1] != "workload_belief_gap_m2"]
-    fig, axes = plt.subplots(len(shown), 2, figsize=(10, 2.3 * len(shown)), squeeze=False)
-    for (name, key, bound, unit), (left, right) in zip(shown, axes, strict=True):
+    bound dashed; for the agents' own workload, the true workload error and the one the
+    agents believed, against the goal's floor."""
+    shown = [g for g in goals if g[1] != BELIEF_KEY]
+    belief = next((g for g in goals if g[1] == BELIEF_KEY), None)
+    panels = len(shown) + (belief is not None)
+    fig, axes = plt.subplots(panels, 2, figsize=(10, 2.3 * panels), squeeze=False)
+    if belief is not None:
+        _belief_panel(rows, belief[0], axes[-1])
+    for (name, key, bound, unit), (left, right) in zip(shown, axes, strict=False):
         ys = [r.get(key, math.nan) for r in rows]
         for ax, xs, label in ((left, [r["robots"] for r in rows], "robots"),
                               (right, [r["length_m"] for r in rows], "edge length, m")):
@@ -129,3 +137,31 @@ def general_figure(rows: list[dict[str, Any]], path: Path, goals: tuple[Goal, ..
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
+
+
+def _belief_panel(rows: list[dict[str, Any]], name: str, pair: Any) -> None:
+    """The true workload error of each case (met or missed: the agents' own within 20 %
+    of it or 0.002 m^2) and the error the agents believed, on a log scale."""
+    floor = 1e-6  # a case at 0 drawn on the axis's floor
+    true = [max(floor, r.get("workload_sse_m2", math.nan)) for r in rows]
+    believed = [max(floor, r.get("workload_sse_agents_m2", math.nan)) for r in rows]
+    ok = [r.get("goals", {}).get(name, False) for r in rows]
+    for ax, xs, label in ((pair[0], [r["robots"] for r in rows], "robots"),
+                          (pair[1], [r["length_m"] for r in rows], "edge length, m")):
+        ax.scatter(xs, believed, s=12, facecolors="none", edgecolors="tab:gray",
+                   label="believed by the agents")
+        ax.scatter([x for x, g in zip(xs, ok, strict=True) if g],
+                   [y for y, g in zip(true, ok, strict=True) if g], s=14, color="tab:blue",
+                   label="true, believed within the goal")
+        ax.scatter([x for x, g in zip(xs, ok, strict=True) if not g],
+                   [y for y, g in zip(true, ok, strict=True) if not g], s=18,
+                   color="tab:red", marker="x", label="true, believed outside it")
+        ax.axhline(0.002, color="k", linestyle="--", linewidth=0.8)
+        ax.set_yscale("log")
+        ax.set_xlabel(label)
+        ax.set_ylabel("workload error, m^2", fontsize=8)
+        if label == "robots":
+            ax.set_xticks(sorted({r["robots"] for r in rows}))
+    pair[0].set_title(f"{name}: true workload error (m^2) and the agents' own; dashed: "
+                      "the goal's floor, 0.002 m^2", fontsize=8, loc="left")
+    pair[1].legend(fontsize=7, loc="lower right")
