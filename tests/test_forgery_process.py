@@ -1,6 +1,6 @@
 """Well-formed lies on a running team's bus (issue 19, items 1-3): a forger process
 joins a real ``btrack sim`` run and, as robot 1, sends a state of tick 10^9, states of
-coming ticks claiming [0, 5.9] m, end depths of 1.7e307 m and a boundary off the law; a
+coming ticks claiming [0.01, 5.9] m, end depths of 1.7e307 m and a boundary off the law; a
 world tick saying the run is done; and a liveliness token of robot 7, held to the end.
 Before the fix these ended the recording at the forged tick, pushed robot 1's
 neighbours off their segments and slowed the lockstep to a tick a second."""
