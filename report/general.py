@@ -118,25 +118,32 @@ def general_figure(rows: list[dict[str, Any]], path: Path, goals: tuple[Goal, ..
         _belief_panel(rows, belief[0], axes[-1])
     for (name, key, bound, unit), (left, right) in zip(shown, axes, strict=False):
         ys = [r.get(key, math.nan) for r in rows]
-        for ax, xs, label in ((left, [r["robots"] for r in rows], "robots"),
-                              (right, [r["length_m"] for r in rows], "edge length, m")):
-            ok = [r.get("goals", {}).get(name, False) for r in rows]
-            ax.scatter([x for x, g in zip(xs, ok, strict=True) if g],
-                       [y for y, g in zip(ys, ok, strict=True) if g], s=14, color="tab:blue",
-                       label="met")
-            ax.scatter([x for x, g in zip(xs, ok, strict=True) if not g],
-                       [y for y, g in zip(ys, ok, strict=True) if not g], s=18,
-                       color="tab:red", marker="x", label="missed")
-            ax.axhline(bound, color="k", linestyle="--", linewidth=0.8)
-            ax.set_xlabel(label)
-            ax.set_ylabel(name, fontsize=8)
-            if label == "robots":
-                ax.set_xticks(sorted({r["robots"] for r in rows}))
+        ok = [r.get("goals", {}).get(name, False) for r in rows]
+        _met_and_missed(rows, (left, right), ys, ok, bound, name, ("met", "missed"))
         left.set_title(f"{name} ({unit}); dashed: the goal", fontsize=8, loc="left")
     axes[0][1].legend(fontsize=7, loc="upper right")
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
+
+
+def _met_and_missed(rows: list[dict[str, Any]], pair: Any, ys: list[float], ok: list[bool],
+                    bound: float, ylabel: str, labels: tuple[str, str]) -> None:
+    """``ys`` against team size (``pair[0]``) and edge length (``pair[1]``): the cases
+    that met the goal as dots, those that missed it as red crosses, ``bound`` dashed."""
+    for ax, xs, label in ((pair[0], [r["robots"] for r in rows], "robots"),
+                          (pair[1], [r["length_m"] for r in rows], "edge length, m")):
+        ax.scatter([x for x, g in zip(xs, ok, strict=True) if g],
+                   [y for y, g in zip(ys, ok, strict=True) if g], s=14, color="tab:blue",
+                   label=labels[0])
+        ax.scatter([x for x, g in zip(xs, ok, strict=True) if not g],
+                   [y for y, g in zip(ys, ok, strict=True) if not g], s=18,
+                   color="tab:red", marker="x", label=labels[1])
+        ax.axhline(bound, color="k", linestyle="--", linewidth=0.8)
+        ax.set_xlabel(label)
+        ax.set_ylabel(ylabel, fontsize=8)
+        if label == "robots":
+            ax.set_xticks(sorted({r["robots"] for r in rows}))
 
 
 def _belief_panel(rows: list[dict[str, Any]], name: str, pair: Any) -> None:
@@ -146,22 +153,13 @@ def _belief_panel(rows: list[dict[str, Any]], name: str, pair: Any) -> None:
     true = [max(floor, r.get("workload_sse_m2", math.nan)) for r in rows]
     believed = [max(floor, r.get("workload_sse_agents_m2", math.nan)) for r in rows]
     ok = [r.get("goals", {}).get(name, False) for r in rows]
-    for ax, xs, label in ((pair[0], [r["robots"] for r in rows], "robots"),
-                          (pair[1], [r["length_m"] for r in rows], "edge length, m")):
+    for ax, xs in ((pair[0], [r["robots"] for r in rows]),
+                   (pair[1], [r["length_m"] for r in rows])):
         ax.scatter(xs, believed, s=12, facecolors="none", edgecolors="tab:gray",
                    label="believed by the agents")
-        ax.scatter([x for x, g in zip(xs, ok, strict=True) if g],
-                   [y for y, g in zip(true, ok, strict=True) if g], s=14, color="tab:blue",
-                   label="true, believed within the goal")
-        ax.scatter([x for x, g in zip(xs, ok, strict=True) if not g],
-                   [y for y, g in zip(true, ok, strict=True) if not g], s=18,
-                   color="tab:red", marker="x", label="true, believed outside it")
-        ax.axhline(0.002, color="k", linestyle="--", linewidth=0.8)
         ax.set_yscale("log")
-        ax.set_xlabel(label)
-        ax.set_ylabel("workload error, m^2", fontsize=8)
-        if label == "robots":
-            ax.set_xticks(sorted({r["robots"] for r in rows}))
+    _met_and_missed(rows, pair, true, ok, 0.002, "workload error, m^2",
+                    ("true, believed within the goal", "true, believed outside it"))
     pair[0].set_title(f"{name}: true workload error (m^2) and the agents' own; dashed: "
                       "the goal's floor, 0.002 m^2", fontsize=8, loc="left")
     pair[1].legend(fontsize=7, loc="lower right")
