@@ -21,6 +21,7 @@ import zenoh
 from tests.procutil import end, free_port, hub_session, member_args, start, unique_ns
 from wire import AgentState, Cmd, Keys, Pose, Sense, decode, encode
 from wire.codec import MSGPACK
+from wire.session import SessionOptions, open_session
 
 
 @pytest.fixture
@@ -241,3 +242,35 @@ def test_an_agent_imports_only_what_it_needs():
               for line in res.stderr.splitlines() if line.startswith("import time:")}
     assert "agent" in loaded and "zenoh" in loaded
     assert not loaded & set(HEAVY), sorted(loaded & set(HEAVY))
+
+
+def test_an_agent_started_before_its_router_waits_for_it_and_joins(tmp_path):
+    """A robot that boots before its base station (or whose first handshake is lost on
+    a lossy link) keeps trying its router, says so, and is alive once the router is."""
+    ns, port = unique_ns(), free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    log, router_log = tmp_path / "agent.log", tmp_path / "router.log"
+    agent = start(["agent", "--id", "0", "--robots", "2", "--ns", ns, "--mode", "client",
+                   "--connect", endpoint, "--no-multicast"], log)
+    router = None
+    try:
+        deadline = time.monotonic() + 30
+        while "cannot reach" not in log.read_text():
+            assert agent.poll() is None, log.read_text()
+            assert time.monotonic() < deadline, "the agent never said it was waiting"
+            time.sleep(0.05)
+        time.sleep(1.5)  # a retry or two with nobody there
+        assert agent.poll() is None, log.read_text()
+        router = start(["router", "--listen", endpoint, "--no-multicast"], router_log)
+        alive: queue.SimpleQueue[zenoh.SampleKind] = queue.SimpleQueue()
+        session = open_session(SessionOptions(ns=ns, mode="client", connect=(endpoint,),
+                                              multicast=False), wait_s=30)
+        with session:
+            session.liveliness().declare_subscriber(
+                Keys(ns).alive(0), lambda s: alive.put(s.kind), history=True)
+            assert alive.get(timeout=30) == zenoh.SampleKind.PUT, log.read_text()
+    finally:
+        end(agent)
+        if router is not None:
+            end(router)
+    assert agent.returncode == 0, log.read_text()

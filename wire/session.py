@@ -13,6 +13,7 @@ import json
 import os
 import sys
 import threading
+import time
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 
@@ -111,9 +112,35 @@ def build_config(opts: SessionOptions, env: Mapping[str, str] | None = None) -> 
     return conf
 
 
-def open_session(opts: SessionOptions) -> zenoh.Session:
+# A client tries its router once (Zenoh's default for clients): a robot that boots
+# before its base station, or whose first handshake is lost on a lossy radio link,
+# would end there. Every process keeps trying this long instead, saying so.
+CONNECT_WAIT_S = 60.0
+CONNECT_RETRY_S = 1.0
+
+
+def open_session(opts: SessionOptions, wait_s: float = CONNECT_WAIT_S) -> zenoh.Session:
+    """A session of ``opts``; while none of its endpoints answers, tried again every
+    second for up to ``wait_s`` seconds (one line on stderr when it starts waiting),
+    then Zenoh's error. Any other error (a bad configuration) is raised at once."""
     zenoh.try_init_log_from_env()
-    return zenoh.open(build_config(opts))
+    deadline = time.monotonic() + wait_s
+    told = False
+    while True:
+        try:
+            return zenoh.open(build_config(opts))
+        except zenoh.ZError as exc:
+            if "Unable to connect" not in str(exc) or time.monotonic() >= deadline:
+                raise
+            if not told:
+                where = ", ".join(opts.connect) or (
+                    f"the endpoints of {opts.config_file}" if opts.config_file
+                    else "its endpoints")
+                print(f"btrack: cannot reach {where} yet; trying again every "
+                      f"{CONNECT_RETRY_S:g} s for up to {wait_s:g} s", file=sys.stderr,
+                      flush=True)
+                told = True
+            time.sleep(CONNECT_RETRY_S)
 
 
 CLOSE_TIMEOUT_S = 3.0
