@@ -163,6 +163,13 @@ class Team:
             self.site.link(1, up=True)
             self.rejoin_wall = time.monotonic()
 
+    def logs_of_ended(self) -> str:
+        """The last lines of the world's log and of every process that has ended."""
+        names = ["world"] + [n for n, p in self.procs.items()
+                             if n != "world" and p.poll() is not None]  # type: ignore[attr-defined]
+        return "\n".join(f"{n}: " + (self.site.logs / f"{n}.log").read_text()[-1500:]
+                         for n in names if (self.site.logs / f"{n}.log").exists())
+
     def world_running(self) -> bool:
         return self.procs["world"].poll() is None  # type: ignore[attr-defined]
 
@@ -210,8 +217,7 @@ class Background:
                 time.sleep(0.02)
             for team in both:
                 code = team.procs["world"].returncode  # type: ignore[attr-defined]
-                assert code == 0, (team.name,
-                                   (team.site.logs / "world.log").read_text()[-2000:])
+                assert code == 0, (team.name, team.logs_of_ended())
         except BaseException as exc:  # handed to the tests, which fail on it
             self.error = exc
         finally:
