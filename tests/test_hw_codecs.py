@@ -221,13 +221,14 @@ def test_configuration_sets_range_bits_units_and_real_time_indices() -> None:
     assert config == lms.LmsConfig(lms.UNIT_MM, 0x04, 0x02)
     assert config.range_bits == 14 and config.range_max_m == 16.375
     assert config.real_time_indices
-    # 16 m in mm: 12.5 m needs the 14th bit; the real-time index is one byte more
+    # 16 m in mm: 12.5 m needs the 14th bit; the real-time indices are two bytes more
     raw = lms.ranges_to_values([12.5, math.inf], config)
     assert raw == [12500, 16375]
-    got = lms.decode_values(lms.encode_values(raw, config, 300) + b"\x10", config)
-    assert got.values == raw and got.real_time_index == 300 % 256
+    got = lms.decode_values(lms.encode_values(raw, config, 300, telegram_index=7) + b"\x10",
+                            config)
+    assert got.values == raw and (got.real_time_index, got.telegram_index) == (300 % 256, 7)
     assert lms.values_to_ranges(got.values, config) == [12.5, 16.375]
-    # the same bytes read as the default 8 m mode lose the bit, and the index is one too many
+    # the same bytes read as the default 8 m mode lose the bit, and the indices are too many
     with pytest.raises(lms.CodecError):
         lms.decode_values(lms.encode_values(raw, config, 1) + b"\x10")
     assert lms.LmsConfig(lms.UNIT_MM, 0x06).range_max_m == 32.759
@@ -369,3 +370,37 @@ def test_packet_odometry_bounds_the_requested_motion_by_the_packets() -> None:
         (0.123, math.radians(10)))
     po.reset()
     assert po.step({**safe, 7: 0x08, 19: 5, 20: 0, 41: 500, 42: 500})[0] == 0.005
+
+
+def test_a_scan_with_real_time_indices_as_the_telegram_listing_lays_it_out() -> None:
+    """Telegram listing 8007954, table 7-25: with "send real-time indices" on (table
+    7-122, block C, bit 1) a B0 reply's values are followed by two bytes, the scan counter
+    and the telegram counter, then the status. Built here byte by byte, not by our
+    encoder (which read one index byte before: every such scan was refused)."""
+    config = lms.LmsConfig(lms.UNIT_MM, 0x00, lms.REAL_TIME_INDICES)
+    data = bytes([0x03, 0x40,  # 3 values, unit mm (bit 14)
+                  0xE8, 0x03, 0xD0, 0x07, 0xF7, 0x1F,  # 1000 mm, 2000 mm, 0x1FF7 (overflow)
+                  0x2A, 0x05,  # scan counter 42, telegram counter 5
+                  0x10])  # status: no error
+    tel = bytes([0x02, 0x80, 12, 0x00, 0xB0]) + data
+    tel += lms.crc16(tel).to_bytes(2, "little")
+    (parsed,) = lms.TelegramParser().feed(tel)
+    assert isinstance(parsed, lms.Telegram)
+    got = lms.decode_values(parsed.data, config)
+    assert got.values == [1000, 2000, 0x1FF7] and got.status == 0x10
+    assert (got.real_time_index, got.telegram_index) == (42, 5)
+    assert lms.values_to_ranges(got.values, config) == [1.0, 2.0, 8.183]
+
+
+@pytest.mark.parametrize("mode", [0x05, 0x06, 0x0F])
+def test_the_32_m_modes_codes_are_not_ranges(mode: int) -> None:
+    """Telegram listing, table 10-15: in a 32 m mode 0x7FF7 to 0x7FFF are codes (value
+    above the maximum, no echo, dazzled, ...), 32.759 m the longest range. Mode 0x0F
+    (32 m, no flags) read 16 bits before, so its codes came out as ranges of 32.76 m."""
+    config = lms.LmsConfig(lms.UNIT_MM, mode)
+    codes = [0x7FF7, 0x7FFA, 0x7FFB, 0x7FFD, 0x7FFE, 0x7FFF]
+    data = (len(codes) + 1 | 0x4000).to_bytes(2, "little") + b"".join(
+        v.to_bytes(2, "little") for v in [32000, *codes]) + b"\x10"
+    got = lms.decode_values(data, config)
+    assert config.range_max_m == 32.759
+    assert lms.values_to_ranges(got.values, config) == [32.0] + [32.759] * len(codes)

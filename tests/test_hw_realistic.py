@@ -152,9 +152,11 @@ LONG_RANGES[40], LONG_RANGES[50] = 60.0, math.inf
     (lms.LmsConfig(lms.UNIT_MM, 0x00), 8.183),
     (lms.LmsConfig(lms.UNIT_MM, 0x04), 16.375),
     (lms.LmsConfig(lms.UNIT_MM, 0x06), 32.759),
+    (lms.LmsConfig(lms.UNIT_MM, 0x0F), 32.759),
     (lms.LmsConfig(lms.UNIT_CM, 0x00), 81.83),
     (lms.LmsConfig(lms.UNIT_MM, 0x00, lms.REAL_TIME_INDICES), 8.183),
-], ids=["mm-8m", "mm-16m", "mm-32m", "cm-80m", "mm-8m-real-time-indices"])
+], ids=["mm-8m", "mm-16m", "mm-32m", "mm-32m-no-flags", "cm-80m",
+       "mm-8m-real-time-indices"])
 def test_lms_scans_read_as_the_sensor_is_configured(tmp_path: Path, config: lms.LmsConfig,
                                                     range_max: float) -> None:
     emu = LmsEmulator(tmp_path / "lms", lambda: LONG_RANGES, config=config).start()

@@ -278,7 +278,7 @@ class LmsDevice:
     # ACK comes at once. A real LMS can take up to about 3 s over a mode switch
     # (sicktoolbox, SickLMS2xx.hh: DEFAULT_SICK_LMS_2XX_SICK_SWITCH_MODE_TIMEOUT).
     reply_latency_s: dict[bytes, float] = field(default_factory=dict)
-    scans_sent: int = 0  # its real-time scan index, modulo 256 on the wire
+    scans_sent: int = 0  # its real-time scan and telegram indices, modulo 256 on the wire
     fatal: bool = False  # scans carry status "fatal error" (a fault in the sensor)
     nak_next: int = 0  # the next telegrams heard are NAKed, as if a glitch corrupted them
     partial_scans: bool = False  # scans come as partial scans, flag and index set
@@ -349,5 +349,6 @@ class LmsDevice:
         partial = 0b100 | self.scans_sent % 4 if self.partial_scans else 0
         status = (0x10 & ~lms.STATUS_MASK) | lms.STATUS_FATAL if self.fatal else 0x10
         return lms.reply(lms.REQUEST_VALUES,
-                         lms.encode_values(raw, self.config, self.scans_sent, partial),
+                         lms.encode_values(raw, self.config, self.scans_sent, partial,
+                                           telegram_index=self.scans_sent),
                          status)

@@ -16,7 +16,8 @@ with their CRC: ``02 00 02 00 20 24 | 34 08`` (continuous output),
 How to read measured values depends on the sensor's configuration, which 0x74 requests
 and 0xF4 answers (``LmsConfig``): the units (cm or mm), the measuring mode (8, 16 or
 32 m: 13, 14 or 15 bits of range in each value word, flags above them) and whether each
-scan carries a real-time scan index, one byte after the values.
+scan carries the real-time indices, two bytes after the values: the scan counter and
+the telegram counter (SICK's telegram listing 8007954, table 7-25, blocks C and D).
 """
 
 from __future__ import annotations
@@ -47,15 +48,22 @@ UNIT_CM, UNIT_MM = 0, 1  # the configuration's units; also bits 14-15 of the cou
 # contours and restart times to byte 33; then the status byte.
 CONFIG_LENGTH = 34
 CONFIG_AVAILABILITY, CONFIG_MODE, CONFIG_UNITS = 4, 5, 6
-REAL_TIME_INDICES = 0x02  # availability bit: each scan carries its real-time index
-# Bits of range in a value word, by measuring mode (sicktoolbox, SickLMS2xx.hh and
-# _extractSickMeasurementValues): 8 m (80 m in cm) with fields or reflector bits in the
-# top 3 bits; 16 m, 2 flag bits; 32 m, 1 flag bit; 0x0F 32 m with no flags. 0x3F
+# availability bit: each scan carries the real-time indices, a scan counter and a
+# telegram counter, a byte each (telegram listing, table 7-122 block C, table 7-25)
+REAL_TIME_INDICES = 0x02
+INDEX_BYTES = 2
+# Bits of range in a value word, by measuring mode (telegram listing, tables 3-7 and
+# 7-28: 13, 14 and 15 bits for 8, 16 and 32 m; table 7-122 block D for the flags): 8 m
+# (80 m in cm) with fields or reflector bits in the top 3 bits; 16 m, 2 flag bits; 32 m,
+# 1 flag bit; 0x0F 32 m with no flags, its codes at 0x7FF7 to 0x7FFF as in the other
+# 32 m modes (tables 10-15). Mode 0x05 the listing gives as 14 bits and 2 reflector bits
+# in block D but as 15 bits in table 7-28; 15, as sicktoolbox reads it. 0x3F
 # (reflectivity instead of range) is not a range mode.
-RANGE_BITS = {0x00: 13, 0x01: 13, 0x02: 13, 0x03: 14, 0x04: 14, 0x05: 15, 0x06: 15, 0x0F: 16}
-# The top values of the range field are codes, not distances: 8183 to 8191 in the 8 m
-# mode ("no return" is 8183, the 8.183 m the README quotes); the same eight codes at the
-# top of the 16 and 32 m modes' wider fields.
+RANGE_BITS = {0x00: 13, 0x01: 13, 0x02: 13, 0x03: 14, 0x04: 14, 0x05: 15, 0x06: 15, 0x0F: 15}
+# The top values of the range field are codes, not distances (telegram listing, tables
+# 10-13 to 10-15): 0x1FF7 (8183, "measured value above the maximum", what a beam that
+# saw nothing reads: the 8.183 m the README quotes) to 0x1FFF (8191, no valid echo) in
+# the 8 m mode; the same codes at the top of the 16 and 32 m modes' wider fields.
 ERROR_CODES = 9
 
 # A reply's status byte: bits 0-2 the sensor's state, 0 ok, 1 info, 2 warning, 3 error,
@@ -205,7 +213,8 @@ class MeasuredValues:
     values: list[int]
     unit: int  # the count word's unit bits
     status: int
-    real_time_index: int | None = None
+    real_time_index: int | None = None  # the scan counter (mod 256), if configured
+    telegram_index: int | None = None  # the telegram counter (mod 256), if configured
     partial: int = 0  # bits 11-13 of the count word, shifted down: 0 for a whole scan
 
     @property
@@ -214,10 +223,11 @@ class MeasuredValues:
 
 
 def encode_values(values: list[int], config: LmsConfig | None = None,
-                  real_time_index: int = 0, partial: int = 0) -> bytes:
+                  real_time_index: int = 0, partial: int = 0,
+                  telegram_index: int = 0) -> bytes:
     """Data of a 0xB0 reply: count word (count in bits 0-9, partial scan in 11-13, unit in
-    14-15), values and, if the configuration asks for them, the real-time scan index (no
-    status byte)."""
+    14-15), values and, if the configuration asks for them, the real-time indices: the
+    scan counter, then the telegram counter (no status byte)."""
     config = config or LmsConfig()
     if len(values) > 0x3FF or not 0 <= partial <= 7:
         raise CodecError("too many values, or a partial scan index past 7")
@@ -226,14 +236,14 @@ def encode_values(values: list[int], config: LmsConfig | None = None,
     for v in values:
         out += (v & 0xFFFF).to_bytes(2, "little")
     if config.real_time_indices:
-        out.append(real_time_index & 0xFF)
+        out += bytes([real_time_index & 0xFF, telegram_index & 0xFF])
     return bytes(out)
 
 
 def decode_values(data: bytes, config: LmsConfig | None = None) -> MeasuredValues:
     """A 0xB0 reply's data (status byte included), read as ``config`` says."""
     config = config or LmsConfig()
-    extra = 1 if config.real_time_indices else 0
+    extra = INDEX_BYTES if config.real_time_indices else 0
     if len(data) < 3 + extra:
         raise CodecError("measured values: too short")
     word = int.from_bytes(data[0:2], "little")
@@ -243,8 +253,8 @@ def decode_values(data: bytes, config: LmsConfig | None = None) -> MeasuredValue
     mask = config.value_mask
     vals = [int.from_bytes(data[2 + 2 * j : 4 + 2 * j], "little") & mask
             for j in range(count)]
-    return MeasuredValues(vals, unit, data[-1], data[-2] if extra else None,
-                          (word & PARTIAL_BITS) >> 11)
+    rt, tg = (data[-3], data[-2]) if extra else (None, None)
+    return MeasuredValues(vals, unit, data[-1], rt, tg, (word & PARTIAL_BITS) >> 11)
 
 
 def values_to_ranges(raw: list[int], config: LmsConfig | None = None) -> list[float]:
