@@ -94,22 +94,22 @@ class PacketOdometry:
     """One frame's motion of an original Create, from packets 19 and 20 and the wheel
     velocities it was asked for (packets 41 and 42).
 
-    The original Create has no encoder packets (43/44 are the Create 2's), and its
-    distance and angle come in whole mm and degrees; firmware older than 3.4.1 drops the
-    remainder at every read (libcreate issue 22), so read every 15 ms a turn slower than
-    about 67 deg/s, or a drive slower than 67 mm/s, reads as none (AutonomyLab
-    create_robot issue 28). Reading less often only lowers that floor and still loses up
-    to a unit a read. What we do instead: integrate the wheel velocities the robot reports
-    as requested (mean of this frame's and the previous frame's, over the 15 ms stream
-    period) and keep the result within one unit of what the packets read. Whether the
-    firmware keeps its remainder, drops it or rounds, a frame's true motion lies within
-    one unit of its reading, so the bound never spoils a good estimate; and it keeps a
-    bad one (wheels slipping or stalled against something: the request is not the motion)
+    The original Create has no encoder packets (43/44 are the Create 2's), and its distance
+    and angle come in whole mm and degrees; its firmware may drop the remainder at every
+    read (a user's reading of AutonomyLab create_robot issue 28; the "older than 3.4.1" of
+    libcreate issue 22 matches the Create 2's known bugs, Create 2 OI p. 41, and no manual
+    settles it for the Create), so read every 15 ms a turn slower than about 67 deg/s, or a
+    drive slower than 67 mm/s, would read as none. Reading less often only lowers that floor
+    and still loses up to a unit a read. What we do instead: integrate the wheel velocities
+    the robot reports as requested (mean of this frame's and the previous frame's, over the
+    15 ms stream period) and keep the result within one unit of what the packets read.
+    Whether the firmware keeps its remainder, drops it or rounds, a frame's true motion lies
+    within one unit of its reading, so the bound never spoils a good estimate; and it keeps
+    a bad one (wheels slipping or stalled against something: the request is not the motion)
     from straying further than the packets allow, which is why integrating the request
     alone, which libcreate's users tried, drifts. Where no wheel is asked to turn (the
     wheels stopped, passive or off mode, a wheel dropped) the robot moves only if pushed,
-    and the packets are all we know: their readings are used as they are.
-    """
+    and the packets are all we know: their readings are used as they are."""
 
     def __init__(self, wheel_base_m: float, period_s: float = STREAM_PERIOD_S) -> None:
         self.wheel_base_m = wheel_base_m
