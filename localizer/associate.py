@@ -49,6 +49,15 @@ class Recovery:
     still_scans: int = 10
     still_m: float = 0.02
     moved_m: float = 0.05
+    # A robot's blob, one it is tracking and that has not yet carried it ``confirm_m``
+    # from where its filter was seeded, that stood within ``held_still_m`` over the last
+    # ``held_scans`` scans while its odometry drove more than ``held_moved_m`` is not its:
+    # it took a parked robot's blob (at the start, hidden behind it) and is released
+    # (lost, to be found on a blob that moves). 0: not checked.
+    confirm_m: float = 0.1
+    held_scans: int = 4
+    held_still_m: float = 0.01
+    held_moved_m: float = 0.02
     # A free blob followed back through those scans (the nearest centre within
     # follow_m each scan) that moved faster than this is no robot (a Create's top speed
     # is 0.5 m/s): a person walking through the team, whose legs can look like one, does
@@ -169,3 +178,21 @@ def recovery(centres: np.ndarray, used: np.ndarray, predicted: np.ndarray,
             free.remove(j)
             out.append((robot, j))
     return out
+
+
+def held_wrongly(match: np.ndarray, centres: np.ndarray, recent: Sequence[np.ndarray],
+                 drove: np.ndarray, rules: Recovery) -> np.ndarray:
+    """The robots whose assigned centre (``match``, -1 for none) stood within
+    ``held_still_m`` over ``recent`` (the last ``held_scans`` scans' centres, this one's
+    among them) while their odometry drove (``drove``, metres between the first of those
+    scans and this one) more than ``held_moved_m``: a blob that stood still is not a
+    robot that drove."""
+    out = np.zeros(match.shape[0], dtype=bool)
+    if rules.held_moved_m <= 0 or len(recent) < rules.held_scans:
+        return out
+    rows = np.flatnonzero((match >= 0) & (drove > rules.held_moved_m))
+    if rows.size:
+        still = still_blobs(centres[match[rows]], recent, rules.held_still_m)
+        out[rows[still]] = True
+    return out
+

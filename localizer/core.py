@@ -30,7 +30,9 @@ and sensor models as objects (``localizer.models``). The steps of
    claimant first, each within a reach that grows with the scans it has been lost,
    and never on a blob whose motion its odometry contradicts (a blob standing
    still is no robot that drove: a robot parked in view, waiting to join, is not
-   taken for a driving one that was hidden behind it at the start).
+   taken for a driving one that was hidden behind it at the start). A robot that
+   took such a blob on the first scan lets it go as soon as its wheels drive while
+   the blob stands (``held_wrongly``), and is lost until a moving blob is its.
 
 Heading is never measured: it comes from odometry and from which headings carry
 the particles to where the scans see the robot.
@@ -49,7 +51,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from agent.phase import wrap_pi_array
-from localizer.associate import Recovery, assign, fast_blobs, recovery, still_blobs
+from localizer.associate import (
+    Recovery,
+    assign,
+    fast_blobs,
+    held_wrongly,
+    recovery,
+    still_blobs,
+)
 from localizer.measure import (  # noqa: F401  (the measurement's API, re-exported)
     Blobs,
     ScanGeometry,
@@ -125,7 +134,11 @@ class FilterConfig:
                                           partial_gate_m=0.06, rotation_s=1.0 / 75.0,
                                           interlace=2, body_radius_m=0.165,
                                           bumper_radius_m=0.172,
-                                          recovery=Recovery(top_speed_m_s=LAB_TOP_SPEED_M_S))
+                                          # held_moved_m 0: a robot released from a parked
+                                          # robot's blob and lost for long took a walking
+                                          # person's legs when it drove out (see README)
+                                          recovery=Recovery(top_speed_m_s=LAB_TOP_SPEED_M_S,
+                                                            held_moved_m=0.0))
         values.update(overrides)
         return cls(**values)  # type: ignore[arg-type]
 
@@ -185,6 +198,14 @@ class Localizer:
         self.w = np.full((robots, n), 1.0 / n)
         self.started = np.zeros(robots, dtype=bool)  # has had a pose at all
         self.missed = np.zeros(robots, dtype=int)  # scans since the last measurement
+        # released from a blob that stood still while it drove (``held_wrongly``) and not
+        # re-seeded since: it takes no blob in the association, only a moving one in the
+        # recovery
+        self.released_from = np.zeros(robots, dtype=bool)
+        # where each robot's filter was last seeded, and whether its blob has since
+        # carried it ``rules.confirm_m`` from there (a track that moved is the robot's)
+        self.seeded_at = np.zeros((robots, 2))
+        self.confirmed = np.zeros(robots, dtype=bool)
         self.drawn = False
         # the last scans' centres and every robot's odometry distance, for still blobs
         self._recent_centres: deque[np.ndarray] = deque(maxlen=self.rules.still_scans)
@@ -192,6 +213,7 @@ class Localizer:
         self._scan_s = 0.0  # the time between the last two ticks' scans (odometry's period)
         self.resampled = 0  # resampling events so far (all robots)
         self.reseeded = 0  # recoveries so far
+        self.released = 0  # robots released from a blob that stood still while they drove
 
     # prediction ------------------------------------------------------------------
     def draw_over_view(self, geometries: Sequence[ScanGeometry]) -> None:
@@ -267,7 +289,49 @@ class Localizer:
         self.w[robot] = 1.0 / n
         self.started[robot] = True
         self.missed[robot] = 0
+        self.released_from[robot] = False
+        self.seeded_at[robot] = centre
+        self.confirmed[robot] = False
         self.reseeded += 1
+
+    def release_held(self, match: np.ndarray, centres: np.ndarray) -> np.ndarray:
+        """``match`` without the blobs robots hold wrongly (``held_wrongly``: a blob that
+        stood still while the robot drove, on a track that never moved since it was
+        seeded), and without any blob for the robots released so: they are lost, and
+        found again by the recovery, which gives them no blob that stood still."""
+        k = self.rules.held_scans
+        recent = list(self._recent_centres)[-k:]
+        # the odometry between the window's first scan and this one (a tick's odometry
+        # is the motion up to its scan: the window's first is from before it)
+        between = list(self._recent_motion)[-k + 1:] if k > 1 else []
+        drove = np.sum(between, axis=0) if between else np.zeros(self.robots)
+        # only tracks that never moved, and only while a robot never seeded whose wheels
+        # stood (one parked, waiting to join) may be the blob's
+        waiting = ~self.started & (np.sum(self._recent_motion, axis=0) == 0)
+        if not waiting.any():
+            return np.where(self.released_from, -1, match)
+        held = np.where(self.confirmed, -1, match)
+        wrong = held_wrongly(held, centres, recent, drove, self.rules)
+        self.released += int(wrong.sum())
+        self.released_from |= wrong
+        # lost at once; lost longer only by the scans it drives (``advance_missed``)
+        self.missed[wrong] = np.maximum(self.missed[wrong], self.rules.lost_after)
+        return np.where(self.released_from, -1, match)
+
+    def advance_missed(self, has: np.ndarray, dist: np.ndarray) -> None:
+        """Scans since each robot's last measurement; a released robot's count only
+        those it drove in: standing where it was lost, hidden behind a parked robot, it
+        stays within the reach of a lost robot's first scans, and does not take a
+        stranger's blob across the scene when it drives out."""
+        still = self.released_from & (np.abs(np.asarray(dist, dtype=float)) == 0.0)
+        self.missed = np.where(has, 0, self.missed + np.where(still, 0, 1))
+
+    def confirm(self, has: np.ndarray) -> None:
+        """Tracks measured this far from where they were seeded are the robots' own."""
+        if has.any():
+            moved = np.hypot(*(self.mean_positions() - self.seeded_at).T) > \
+                self.rules.confirm_m
+            self.confirmed |= has & moved
 
     def recover(self, centres: np.ndarray, used: np.ndarray) -> None:
         """Re-seed lost robots on robot-shaped blobs no robot took (``recovery``)."""
@@ -277,8 +341,15 @@ class Localizer:
         known = len(self._recent_centres) == self.rules.still_scans  # enough to tell
         still = still_blobs(centres, self._recent_centres, self.rules.still_m) \
             if known else None
+        k = self.rules.held_scans
+        if still is None and self.released_from.any() and len(self._recent_centres) >= k:
+            # a robot released for driving while its blob stood takes no blob that
+            # stood as long, nor does it hold one from the others meanwhile
+            still = still_blobs(centres, list(self._recent_centres)[-k:],
+                                self.rules.held_still_m)
         moved = (np.sum(self._recent_motion, axis=0) > self.rules.moved_m
                  if self._recent_motion else np.zeros(self.robots, dtype=bool))
+        moved = moved | self.released_from  # it drove while its blob stood
         r = self.rules
         fast = (fast_blobs(centres, self._recent_centres, r.follow_m, r.top_speed_m_s,
                            self._scan_s) if r.top_speed_m_s > 0 and self._scan_s > 0
@@ -321,15 +392,17 @@ class Localizer:
         centres = merge_centres([measure_centres(r, g, self.config) for r, g in scans],
                                 self.config.radius_m)
         match = assign(self.mean_positions(), centres, self.started, self.config.gate_m)
+        self._recent_centres.append(centres)
+        self._recent_motion.append(np.abs(np.asarray(dist, dtype=float)))
+        match = self.release_held(match, centres)
         has = match >= 0
         z = np.zeros((self.robots, 2))
         z[has] = centres[match[has]]
         self.update(z, has)
-        self.missed = np.where(has, 0, self.missed + 1)
+        self.confirm(has)
+        self.advance_missed(has, dist)
         used = np.zeros(centres.shape[0], dtype=bool)
         used[match[has]] = True
-        self._recent_centres.append(centres)
-        self._recent_motion.append(np.abs(np.asarray(dist, dtype=float)))
         self.recover(centres, used)
         return self.estimates(has)
 
@@ -346,6 +419,9 @@ class Localizer:
         gates = np.where(blobs.full, c.gate_m, min(c.partial_gate_m, c.gate_m))
         predicted = self.mean_positions()
         match = assign(predicted, centres, self.started, gates)
+        self._recent_centres.append(centres)
+        self._recent_motion.append(np.abs(dist))
+        match = self.release_held(match, centres)
         has = match >= 0
         z = np.zeros((self.robots, 2))
         z[has] = centres[match[has]]
@@ -358,11 +434,10 @@ class Localizer:
         if c.body_radius_m > 0 and has.any():
             self._outline(z, has, scans)
         self.update(z, has)
-        self.missed = np.where(has, 0, self.missed + 1)
+        self.confirm(has)
+        self.advance_missed(has, dist)
         used = ~blobs.full.copy()  # a partial blob starts no track
         used[match[has]] = True
-        self._recent_centres.append(centres)
-        self._recent_motion.append(np.abs(dist))
         self.recover(centres, used)
         return self.estimates(has)
 

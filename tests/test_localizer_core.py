@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from filterpy.monte_carlo import systematic_resample as filterpy_systematic
 
+from localizer.associate import Recovery, held_wrongly
 from localizer.core import (
     FilterConfig,
     Localizer,
@@ -219,12 +220,12 @@ def _run_team(loc: Localizer, laser: Laser, poses: np.ndarray, odom: np.ndarray
                                                                           strict=True)])
 
 
-def test_a_robot_parked_in_view_is_not_taken_for_a_driving_one() -> None:
-    """btrack sim --robots 3 --fault join:3@200 with pf: robot 1 starts hidden behind
-    the joiner parked in front of it, so at the start robot 1's filter takes the
-    joiner's blob. Once robot 1 drives, a blob that stands still is not it: it is
-    found where it comes out, and the joiner's filter gets the parked blob."""
-    steps = 120
+def _parked_joiner_scene(steps: int, wait: int, first_move: float
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """Poses and odometry of ``btrack sim --robots 3 --fault join:3@...``'s start: robots
+    0 and 2 drive up from the start line, robot 3 stands parked in front of the scanner
+    and robot 1 behind it, which drives ``first_move`` at the first tick, waits until
+    scan ``wait`` and then drives off up and left."""
     poses = np.zeros((steps, 4, 3))
     odom = np.zeros((steps, 4, 2))
     poses[:, 3] = (3.0, -1.5, 0.5 * math.pi)  # parked, never driven
@@ -232,17 +233,67 @@ def test_a_robot_parked_in_view_is_not_taken_for_a_driving_one() -> None:
         for k in range(steps):
             poses[k, r] = (x, -1.0 + 0.02 * k, 0.5 * math.pi)
             odom[k, r] = (0.02 if k else 0.0, 0.0)
-    heading = 0.75 * math.pi  # robot 1 waits 30 scans, then drives off up and left
+    heading = 0.75 * math.pi
     for k in range(steps):
-        d = 0.03 * max(0, k - 30)
-        poses[k, 1] = (2.8 + d * math.cos(heading), -1.0 + d * math.sin(heading),
-                       heading if k > 30 else heading)
-        odom[k, 1] = (0.03 if k > 30 else 0.0, 0.0)
+        d = 0.03 * max(0, k - wait)
+        poses[k, 1] = (2.8 + d * math.cos(heading), -1.0 + first_move + d * math.sin(heading),
+                       heading)
+        odom[k, 1] = (0.03 if k > wait else 0.0, 0.0)
+    poses[0, 1, 1] = -1.0
+    odom[1, 1, 0] += first_move
+    return poses, odom
+
+
+def test_a_robot_parked_in_view_is_not_taken_for_a_driving_one() -> None:
+    """btrack sim --robots 3 --fault join:3@200 with pf: robot 1 starts hidden behind
+    the joiner parked in front of it, so at the start robot 1's filter takes the
+    joiner's blob. Once robot 1 drives, a blob that stands still is not it: it is
+    found where it comes out, and the joiner's filter gets the parked blob."""
+    poses, odom = _parked_joiner_scene(120, wait=30, first_move=0.0)
     loc = Localizer(4, seed=8)
     errors = _run_team(loc, Laser(SCANNER, seed=8), poses, odom)
     assert errors[5, 1] > 0.3  # hidden at the start: it took the joiner's blob
     assert (errors[-30:, :] < 0.05).all()  # each robot found, the joiner on its spot
     assert (errors[:, 0] < 0.05).all() and (errors[:, 2] < 0.05).all()
+
+
+def test_a_robot_that_drove_is_not_the_parked_blob_it_took_at_the_start() -> None:
+    """As ``btrack sim --robots 3 --fault join:3@200`` starts: robot 1, hidden behind the
+    joiner parked in front of it, takes the joiner's blob on the first scan; it drives
+    2.8 cm at the first tick and then waits (its phase is ahead). A blob that stood
+    still is no robot that drove: robot 1 is released within a few scans (lost, as a
+    robot hidden is), and the joiner takes its parked blob; robot 1 takes no blob that
+    stands still, and is found once it drives out where the laser sees it."""
+    steps = 90
+    poses, odom = _parked_joiner_scene(steps, wait=50, first_move=0.028)
+    loc = Localizer(4, seed=8)
+    laser = Laser(SCANNER, seed=8)
+    est, lost = [], []
+    for k in range(steps):
+        out = loc.step(scan_of(laser, poses[k, :, :2].tolist()), GEOMETRY, odom[k, :, 0],
+                       odom[k, :, 1])
+        est.append([(e.x, e.y) for e in out])
+        lost.append([e.lost for e in out])
+    err = np.hypot(*(np.array(est) - poses[:, :, :2]).transpose(2, 0, 1))  # (T, R)
+    assert err[0, 1] > 0.3  # it did take the joiner's blob
+    assert loc.released == 1
+    assert (err[4:, 3] < 0.01).all()  # the joiner on its parked spot from the fourth scan
+    assert all(row[1] for row in lost[10:45])  # robot 1 lost while hidden, not on a blob
+    assert (err[-20:, 1] < 0.05).all()  # found once it drives out
+    assert (err[:, 0] < 0.05).all() and (err[:, 2] < 0.05).all()
+
+
+def test_a_blob_held_is_released_only_when_it_stood_while_the_robot_drove() -> None:
+    rules = Recovery()
+    still = [np.array([[1.0, 0.0], [2.0, 0.0]])] * rules.held_scans
+    moving = [np.array([[1.0, 0.0], [2.0, 0.01 * k]]) for k in range(rules.held_scans)]
+    match = np.array([0, 1])
+    drove = np.array([0.03, 0.03])
+    assert held_wrongly(match, still[-1], still, drove, rules).tolist() == [True, True]
+    assert held_wrongly(match, moving[-1], moving, drove, rules).tolist() == [True, False]
+    assert not held_wrongly(match, still[-1], still, np.array([0.01, 0.0]), rules).any()
+    assert not held_wrongly(np.array([-1, -1]), still[-1], still, drove, rules).any()
+    assert not held_wrongly(match, still[-1], still[:2], drove, rules).any()  # too soon
 
 
 def test_an_occluded_robot_does_not_jump_to_a_blob_across_the_scene() -> None:
