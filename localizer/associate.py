@@ -195,4 +195,3 @@ def held_wrongly(match: np.ndarray, centres: np.ndarray, recent: Sequence[np.nda
         still = still_blobs(centres[match[rows]], recent, rules.held_still_m)
         out[rows[still]] = True
     return out
-

@@ -299,17 +299,17 @@ class Localizer:
         stood still while the robot drove, on a track that never moved since it was
         seeded), and without any blob for the robots released so: they are lost, and
         found again by the recovery, which gives them no blob that stood still."""
+        # only tracks that never moved, and only while a robot never seeded whose wheels
+        # stood (one parked, waiting to join) may be the blob's
+        waiting = ~self.started & (np.sum(self._recent_motion, axis=0) == 0)
+        if not waiting.any():
+            return np.where(self.released_from, -1, match)
         k = self.rules.held_scans
         recent = list(self._recent_centres)[-k:]
         # the odometry between the window's first scan and this one (a tick's odometry
         # is the motion up to its scan: the window's first is from before it)
         between = list(self._recent_motion)[-k + 1:] if k > 1 else []
         drove = np.sum(between, axis=0) if between else np.zeros(self.robots)
-        # only tracks that never moved, and only while a robot never seeded whose wheels
-        # stood (one parked, waiting to join) may be the blob's
-        waiting = ~self.started & (np.sum(self._recent_motion, axis=0) == 0)
-        if not waiting.any():
-            return np.where(self.released_from, -1, match)
         held = np.where(self.confirmed, -1, match)
         wrong = held_wrongly(held, centres, recent, drove, self.rules)
         self.released += int(wrong.sum())
@@ -328,10 +328,11 @@ class Localizer:
 
     def confirm(self, has: np.ndarray) -> None:
         """Tracks measured this far from where they were seeded are the robots' own."""
-        if has.any():
-            moved = np.hypot(*(self.mean_positions() - self.seeded_at).T) > \
-                self.rules.confirm_m
-            self.confirmed |= has & moved
+        rows = np.flatnonzero(has & ~self.confirmed)  # once confirmed, for good
+        if rows.size:
+            at = self.mean_positions()[rows]
+            moved = np.hypot(*(at - self.seeded_at[rows]).T) > self.rules.confirm_m
+            self.confirmed[rows[moved]] = True
 
     def recover(self, centres: np.ndarray, used: np.ndarray) -> None:
         """Re-seed lost robots on robot-shaped blobs no robot took (``recovery``)."""
