@@ -25,15 +25,39 @@ function report(code) {
   process.exit(code);
 }
 
+const byChannel = new Map(); // channel id -> topic, for a subscription tried again
+const retries = new Map(); // channel id -> subscriptions tried again
+
+function subscribe(channelId, topic) {
+  bySubscription.set(client.subscribe(channelId), topic);
+}
+
 client.on("advertise", (channels) => {
   for (const channel of channels) {
     if (wanted.includes(channel.topic) && !(channel.topic in seen)) {
       seen[channel.topic] = {
         schemaName: channel.schemaName, encoding: channel.encoding, messages: 0, first: null,
       };
-      bySubscription.set(client.subscribe(channel.id), channel.topic);
+      byChannel.set(channel.id, channel.topic);
+      subscribe(channel.id, channel.topic);
     }
   }
+});
+
+// The SDK's server can refuse a subscription to a channel it has just advertised
+// ("Unknown channel ID: N", once in several CI runs, while the view was creating its
+// first channels as the client connected). A client that gives up then never sees
+// the topic; this one asks again, as a viewer left open would want.
+client.on("status", (status) => {
+  process.stderr.write(`server status: ${JSON.stringify(status)}\n`);
+  const refused = /Unknown channel ID: (\d+)/.exec(status.message ?? "");
+  if (refused === null) return;
+  const channelId = Number(refused[1]);
+  const topic = byChannel.get(channelId);
+  const tried = retries.get(channelId) ?? 0;
+  if (topic === undefined || tried >= 20) return;
+  retries.set(channelId, tried + 1);
+  setTimeout(() => subscribe(channelId, topic), 250);
 });
 
 client.on("message", ({ subscriptionId, data }) => {
