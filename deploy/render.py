@@ -194,7 +194,8 @@ def router_config(fleet: Fleet, listen_host: str = "0.0.0.0") -> dict[str, Any]:
         "mode": "router",
         "listen": {"endpoints": [f"{proto}/{listen_host}:{fleet.base.port}"]},
         "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
-        "transport": {"link": {"tx": {"lease": int(fleet.base.lease_s * 1000)}}},
+        "transport": {"link": {"tx": {"lease": int(fleet.base.lease_s * 1000)}},
+                      "shared_memory": {"enabled": False}},  # as wire.session's default
     }
     if fleet.tls.enabled:
         p = _tls_paths(fleet, fleet.tls.base_cert, fleet.tls.base_key)
@@ -227,7 +228,8 @@ def client_config(fleet: Fleet, who: Robot | str, host: str | None = None) -> di
         "connect": {"endpoints": [f"{proto}/{host}:{fleet.base.port}"]},
         "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
         # the holder of a liveliness token announces the lease its peers use to drop it
-        "transport": {"link": {"tx": {"lease": int(lease * 1000)}}},
+        "transport": {"link": {"tx": {"lease": int(lease * 1000)}},
+                      "shared_memory": {"enabled": False}},  # as wire.session's default
     }
     if fleet.tls.enabled:
         cert, key = ((robot.cert, robot.key) if robot is not None
