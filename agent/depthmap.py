@@ -223,6 +223,8 @@ class DepthMap:
         expected = self._expected_at(b, s)
         if expected is None or abs(depth - expected) <= STALE_M:
             return False
+        if self._agreed_near(b, s, depth):  # a step between its samples, not a change
+            return False
         sign = math.copysign(1.0, depth - expected)
         before, self.contradicted = self.contradicted, (sign, self.now)
         if not self.changing and (before is None or before[0] != sign
@@ -231,6 +233,23 @@ class DepthMap:
         self._begin_changing()
         self.changed_t = self.now
         return True
+
+    def _agreed_near(self, b: int, s: float, depth: float) -> bool:
+        """Whether an earlier sample within BRACKET_M of ``s`` (on a bin's side too: a
+        step may lie there) measured ``depth`` to STALE_M: then a sample that contradicts
+        the one nearest it lies across a step from it, which samples on both sides have
+        found before. On a map that changed, the earlier samples near a place all say
+        the old depth; on a step inside a column, sampled sweep after sweep a few
+        millimetres either side of it, two samples a centimetre apart across it said so
+        twice within a cycle, and a static map was taken for a changing one (20 robots
+        on 12 m of steps: a robot's believed workload 0.05 m^2, a fifth of it, off for
+        380 s)."""
+        for k in (b - 1, b, b + 1):
+            for q, d, _, top, _ in self.points.get(k, ()):
+                if (abs(q - s) <= BRACKET_M
+                        and abs(self._depth_now(q, d, top) - depth) <= STALE_M):
+                    return True
+        return False
 
     def _expected_at(self, b: int, s: float) -> float | None:
         """What the earlier samples near ``s`` (none on a bin's side) say its depth is,

@@ -5,6 +5,7 @@ after each change, the recorder's judgement of a changed depth profile, and the 
 from __future__ import annotations
 
 import math
+import random
 import subprocess
 import sys
 from pathlib import Path
@@ -256,3 +257,21 @@ def test_a_change_that_ends_after_the_run_is_fine_as_far_as_it_goes() -> None:
     assert change is not None
     assert change.patrol_depth_bins(100.0, 0.1)[0] == pytest.approx(1.65)
     assert math.isfinite(change.changes[0].t1)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.floats(0.515, 0.585))
+def test_a_step_inside_a_column_never_looks_changed(seed: int, step: float) -> None:
+    # a step of 0.83 m inside a column (not at a bin's side), sampled leg after leg a
+    # few millimetres either side of it, as sweeps at new offsets do: samples a
+    # centimetre apart across it disagree by far more than a change's STALE_M, and the
+    # map must still not take the static profile for a changing one
+    rng = random.Random(seed)
+    dm = DepthMap(0.0, 0.1, 0.3)
+    for _ in range(200):
+        s = step + rng.uniform(-0.02, 0.02)
+        depth = 0.3 if s < step else 1.13
+        dm.record(s, depth + rng.uniform(-0.004, 0.004),
+                  PRECISE if rng.random() < 0.8 else ROUGH)
+        dm.tick(0.1, 60.0)  # a leg a tick, all within the team's cycle
+    assert not dm.changing and dm.changed_t == 0.0  # nor was it, for a while
