@@ -12,10 +12,19 @@ recording lacks against the run's, messages the processes dropped as malformed o
 refused as implausible, and commands the world timed out on.
 
     .venv/bin/python bench/soak.py [--hours 24] [--robots 3] [--chaos 7] [--out DIR]
+                                   [--wall-limit SECONDS]
 
-Writes DIR/soak.json (every reading, the hourly errors, the counts) and DIR/soak.png,
+How far behind the world the recorder was, tick by tick, comes from the recording
+itself: each Tick carries the world's wall clock when it was sent and the recorder
+stamps the wall clock when it took it off its channel. A recorder that grows while it
+falls behind holds a backlog; one that grows while it keeps up leaks.
+
+Writes DIR/readings.jsonl as it goes (a bench stopped by force leaves its readings),
+DIR/soak.json (every reading, the hourly errors and lags, the counts) and DIR/soak.png,
 and prints the table BENCHMARKS.md quotes: each process's memory at the end of hour 1
-and at the end of the run, the recording's size, the errors by hour, what was lost.
+and at the end of the run, the recording's size, the errors and the recorder's lag by
+hour, what was lost. ``--wall-limit`` (or Ctrl-C) ends the run early, as ``btrack sim``
+ends on SIGTERM (the recorder finishes its file), and reports on the hours it reached.
 """
 
 from __future__ import annotations
@@ -23,6 +32,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import signal
 import subprocess
 import sys
 import tempfile
@@ -114,11 +124,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--chaos", type=int, default=7, help="seed of the chaos schedule (7)")
     p.add_argument("--every", type=float, default=5.0,
                    help="wall seconds between two readings of /proc (5)")
+    p.add_argument("--wall-limit", type=float, metavar="SECONDS",
+                   help="end the run after this much wall time and report on what it "
+                        "reached (none: run the --hours)")
     p.add_argument("--out", type=Path, help="output directory (a fresh temporary one)")
     return p
 
 
-def run_and_watch(args: argparse.Namespace, out: Path) -> tuple[list[dict[str, Any]], int]:
+def run_and_watch(args: argparse.Namespace, out: Path
+                  ) -> tuple[list[dict[str, Any]], int, str]:
+    """Run the team, reading /proc as it goes; the readings, the launcher's exit code
+    and why the run ended early ("" if it ran its hours)."""
     btrack = str(Path(sys.executable).parent / "btrack")
     cmd = [btrack, "sim", "--robots", str(args.robots), "--map", args.map,
            "--localization", "truth", "--duration", str(args.hours * HOUR_S),
@@ -127,32 +143,71 @@ def run_and_watch(args: argparse.Namespace, out: Path) -> tuple[list[dict[str, A
     readings: list[dict[str, Any]] = []
     names: dict[int, str] = {}
     recording = out / "run.mcap"
-    with open(out / "launcher.log", "wb") as log:
+    began = time.monotonic()
+    ended_early = ""
+    with open(out / "launcher.log", "wb") as log, open(out / "readings.jsonl", "w") as stream:
         launcher = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
         try:
-            next_report = time.monotonic() + 60
+            next_report = began + 60
             while launcher.poll() is None:
                 now_ns = time.time_ns()
+                taken = []
                 for pid in children_of(launcher.pid):
                     if pid not in names:
                         names[pid] = process_name(read_cmdline(pid))
                     rss = read_rss_mb(pid)
                     if rss is not None and names[pid] != "other":
-                        readings.append({"wall_ns": now_ns, "pid": pid, "name": names[pid],
-                                         "rss_mb": rss})
+                        taken.append({"wall_ns": now_ns, "pid": pid, "name": names[pid],
+                                      "rss_mb": rss})
                 size = recording.stat().st_size if recording.exists() else 0
-                readings.append({"wall_ns": now_ns, "pid": 0, "name": "recording",
-                                 "rss_mb": size / 2**20})
-                if time.monotonic() >= next_report:
-                    print(f"  {len(readings)} readings, recording {size / 2**20:.0f} MB",
-                          file=sys.stderr, flush=True)
+                taken.append({"wall_ns": now_ns, "pid": 0, "name": "recording",
+                              "rss_mb": size / 2**20})
+                readings += taken
+                stream.writelines(json.dumps(r) + "\n" for r in taken)
+                stream.flush()
+                now = time.monotonic()
+                if now >= next_report:
+                    print(f"  {now - began:.0f} s: {len(readings)} readings, recording "
+                          f"{size / 2**20:.0f} MB", file=sys.stderr, flush=True)
                     next_report += 60
+                if args.wall_limit is not None and now - began >= args.wall_limit:
+                    ended_early = f"the wall limit of {args.wall_limit:g} s"
+                    break
                 time.sleep(args.every)
+        except KeyboardInterrupt:
+            ended_early = "Ctrl-C"
         finally:
             if launcher.poll() is None:
-                launcher.terminate()
-            code = launcher.wait()
-    return readings, code
+                # as Ctrl-C would: the launcher stops every process, the recorder
+                # finishes its file
+                launcher.send_signal(signal.SIGINT)
+            try:
+                code = launcher.wait(60)
+            except subprocess.TimeoutExpired:
+                launcher.kill()
+                code = launcher.wait()
+    return readings, code, ended_early
+
+
+def recorder_lag(run: Any) -> np.ndarray:
+    """Seconds by which the recorder took each tick after the world sent it (NaN where
+    the world gave no wall clock)."""
+    sent = np.asarray(run.tick_log_ns, dtype=np.int64)
+    taken = np.asarray(run.tick_recorded_ns, dtype=np.int64)
+    lag = (taken - sent).astype(float) / 1e9
+    lag[taken == sent] = np.nan  # tick_log_ns fell back on the recorder's own stamp
+    return lag
+
+
+def hourly_lag(t: np.ndarray, lag: np.ndarray, hours: int) -> list[dict[str, float]]:
+    """The recorder's lag within each simulated hour: its median and its worst."""
+    out = []
+    for h in range(hours):
+        values = lag[(t >= h * HOUR_S) & (t < (h + 1) * HOUR_S)]
+        values = values[np.isfinite(values)]
+        out.append({"median_s": float(np.median(values)) if values.size else math.nan,
+                    "max_s": float(values.max()) if values.size else math.nan})
+    return out
 
 
 def analyse(args: argparse.Namespace, out: Path, readings: list[dict[str, Any]]
@@ -167,9 +222,12 @@ def analyse(args: argparse.Namespace, out: Path, readings: list[dict[str, Any]]
                        tick_wall, tick_t)
     for r, s in zip(readings, sims, strict=True):
         r["sim_t"] = float(s)
-    hours = max(1, math.ceil(args.hours))
+    end_t = float(tick_t[-1]) if tick_t.size else 0.0
+    hours = max(1, math.ceil((end_t + 0.1) / HOUR_S - 1e-9))
     errors = run_table(run).errors
-    expected = round(args.hours * HOUR_S / 0.1)
+    lag = recorder_lag(run)
+    # the ticks from the first to the last recorded (a run ended early: those it reached)
+    expected = round(end_t / 0.1) + 1 if tick_t.size else 0
     lost = {"ticks_recorded": int(tick_t.size), "ticks_expected": expected,
             "invalid_recorded": run.invalid, "rejected_recorded": sum(run.rejected.values()),
             "refused": run.refused, "recording_cut_short": run.cut_short}
@@ -178,14 +236,18 @@ def analyse(args: argparse.Namespace, out: Path, readings: list[dict[str, Any]]
         lost.update({f"world_{k}": world.get(k) for k in ("dropped", "rejected", "timeouts")})
     except (OSError, ValueError, StopIteration) as exc:
         lost["world_summary"] = f"not read: {exc}"
-    end_t = float(tick_t[-1]) if tick_t.size else 0.0
+    step = max(1, lag.size // 4000)  # the lag series as the figure draws it
     return {
-        "hours": args.hours, "robots": args.robots, "map": args.map, "chaos": args.chaos,
-        "faults": len(run.faults),
+        "hours": args.hours, "hours_reached": end_t / HOUR_S, "robots": args.robots,
+        "map": args.map, "chaos": args.chaos, "faults": len(run.faults),
         "memory_hour_1": memory_at(readings, HOUR_S),
         "memory_end": memory_at(readings, end_t),
         "phase_by_hour_rad": hourly_means(errors.t, errors.phase, hours),
         "workload_by_hour_m2": hourly_means(errors.t, errors.workload, hours),
+        "recorder_lag_by_hour": hourly_lag(tick_t, lag, hours),
+        "recorder_lag": {"t": tick_t[::step].tolist(),
+                         "lag_s": [None if not math.isfinite(v) else round(v, 3)
+                                   for v in lag[::step]]},
         "lost": lost, "readings": readings,
     }
 
@@ -196,7 +258,7 @@ def figure(result: dict[str, Any], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (mem, rec, err) = plt.subplots(3, 1, figsize=(9, 9), sharex=True)
+    fig, (mem, rec, behind, err) = plt.subplots(4, 1, figsize=(9, 11), sharex=True)
     by_name: dict[str, list[tuple[float, float]]] = defaultdict(list)
     for r in result["readings"]:
         if math.isfinite(r["sim_t"]):
@@ -207,6 +269,10 @@ def figure(result: dict[str, Any], path: Path) -> None:
     mem.set_ylabel("resident MB")
     mem.legend(fontsize=7, ncol=4)
     rec.set_ylabel("run.mcap MB")
+    lag = result["recorder_lag"]
+    behind.plot(np.asarray(lag["t"]) / HOUR_S,
+                [math.nan if v is None else v for v in lag["lag_s"]], lw=0.7)
+    behind.set_ylabel("recorder behind, s")
     hours = np.arange(len(result["phase_by_hour_rad"])) + 0.5
     err.plot(hours, result["phase_by_hour_rad"], "o-", label="position phase, rad")
     err.plot(hours, result["workload_by_hour_m2"], "s-", label="workload, m^2")
@@ -223,35 +289,44 @@ def table(result: dict[str, Any]) -> str:
     lines = ["| process | MB at hour 1 | MB at the end |", "| --- | --- | --- |"]
     for name in sorted(set(one) | set(end)):
         lines.append(f"| {name} | {one.get(name, math.nan):.1f} | {end.get(name, math.nan):.1f} |")
-    lines += ["", "| hour | position phase rad | workload m^2 |", "| --- | --- | --- |"]
-    for h, (p, w) in enumerate(zip(result["phase_by_hour_rad"], result["workload_by_hour_m2"],
-                                   strict=True)):
-        lines.append(f"| {h + 1} | {p:.4f} | {w:.4f} |")
+    lines += ["", "| hour | position phase rad | workload m^2 | recorder behind, median s "
+              "| worst s |", "| --- | --- | --- | --- | --- |"]
+    for h, (p, w, lag) in enumerate(zip(result["phase_by_hour_rad"],
+                                        result["workload_by_hour_m2"],
+                                        result["recorder_lag_by_hour"], strict=True)):
+        lines.append(f"| {h + 1} | {p:.4f} | {w:.4f} | {lag['median_s']:.2f} "
+                     f"| {lag['max_s']:.2f} |")
     lines += ["", "lost: " + json.dumps(result["lost"]) + f"; faults injected: {result['faults']}"]
     return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    if not (args.hours > 0 and args.robots >= 2 and args.every > 0):
-        print("bench/soak.py: --hours and --every must be positive, --robots at least 2",
-              file=sys.stderr)
+    if not (args.hours > 0 and args.robots >= 2 and args.every > 0
+            and (args.wall_limit is None or args.wall_limit > 0)):
+        print("bench/soak.py: --hours, --every and --wall-limit must be positive, --robots "
+              "at least 2", file=sys.stderr)
         return 2
     out = args.out or Path(tempfile.mkdtemp(prefix="soak-"))
     out.mkdir(parents=True, exist_ok=True)
     began = time.monotonic()
-    readings, code = run_and_watch(args, out)
-    if code != 0:
+    readings, code, ended_early = run_and_watch(args, out)
+    if ended_early:
+        print(f"bench/soak.py: run ended early by {ended_early}; reporting what it reached",
+              file=sys.stderr)
+    elif code != 0:
         print(f"bench/soak.py: btrack sim exited {code}; see {out}/launcher.log",
               file=sys.stderr)
     result = analyse(args, out, readings)
     result["wall_s"] = round(time.monotonic() - began, 1)
     result["sim_exit"] = code
+    result["ended_early"] = ended_early
     (out / "soak.json").write_text(json.dumps(result, indent=1, allow_nan=True) + "\n")
     figure(result, out / "soak.png")
     print(table(result))
-    print(f"wall {result['wall_s']} s; {out}/soak.json, {out}/soak.png")
-    return 0 if code == 0 else 1
+    print(f"{result['hours_reached']:.2f} simulated hours in {result['wall_s']} s of wall "
+          f"time; {out}/soak.json, {out}/soak.png")
+    return 0 if code == 0 or ended_early else 1
 
 
 if __name__ == "__main__":

@@ -68,6 +68,9 @@ class RunData:
     info: dict[str, Any]  # the last WorldInfo, {} if none was recorded
     tick_t: np.ndarray  # simulation time of each tick
     tick_log_ns: np.ndarray  # wall clock (ns) of each tick: the world's, else the recorder's
+    # the recorder's wall clock (ns) when it took each tick off its channel: less
+    # tick_log_ns, how far the recording lagged behind the world (0 if the world gave none)
+    tick_recorded_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     tick_live: list[list[int]] = field(default_factory=list)  # the world's live agents
     faults: list[dict[str, Any]] = field(default_factory=list)  # Fault messages, by time
     truth: dict[int, Truth] = field(default_factory=dict)
@@ -192,7 +195,7 @@ def load_run(path: str | Path) -> RunData:
     if not path.is_file():
         raise LoadError(f"no recording at {path}")
     info: dict[str, Any] = {}
-    ticks: list[tuple[float, int]] = []
+    ticks: list[tuple[float, int, int]] = []
     live: list[list[int]] = []
     faults: list[dict[str, Any]] = []
     truth: dict[int, list[tuple[float, ...]]] = defaultdict(list)
@@ -244,7 +247,7 @@ def load_run(path: str | Path) -> RunData:
                     continue
                 if isinstance(msg, Tick):
                     # the world's own wall clock when it has one, else the recorder's
-                    ticks.append((msg.t, msg.wall_ns or message.log_time))
+                    ticks.append((msg.t, msg.wall_ns or message.log_time, message.log_time))
                     world_counts = (msg.dropped, msg.rejected)
                     live.append(sorted(msg.live))
                 elif isinstance(msg, Fault):
@@ -274,13 +277,15 @@ def load_run(path: str | Path) -> RunData:
     if cut and not read:
         raise LoadError(f"cannot read {path}: not one whole message: {cut[0]}")
 
-    tick_arr = np.asarray(ticks, dtype=float).reshape(-1, 2)
-    order = np.argsort(tick_arr[:, 0], kind="stable")
+    tick_t = np.asarray([tick[0] for tick in ticks], dtype=float)
+    order = np.argsort(tick_t, kind="stable")
     tick_log = np.asarray([ticks[i][1] for i in order], dtype=np.int64)
+    tick_recorded = np.asarray([ticks[i][2] for i in order], dtype=np.int64)
     return RunData(
         info=info,
-        tick_t=tick_arr[order, 0].copy(),
+        tick_t=tick_t[order],
         tick_log_ns=tick_log,
+        tick_recorded_ns=tick_recorded,
         tick_live=[live[i] for i in order],
         faults=sorted(faults, key=lambda f: (f["t"], f["log_ns"])),
         truth={r: Truth(**_columns(rows, TRUTH_FIELDS)) for r, rows in truth.items()},

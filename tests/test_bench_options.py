@@ -20,6 +20,7 @@ BENCH = Path(__file__).resolve().parent.parent / "bench"
     ("tick_cpu.py", ["--env", "NOEQUALS"], "NAME=VALUE"),
     ("soak.py", ["--hours", "0"], "must be positive"),
     ("soak.py", ["--robots", "1"], "at least 2"),
+    ("soak.py", ["--wall-limit", "0"], "must be positive"),
 ])
 def test_a_bad_option_is_refused(bench, args, why):
     res = subprocess.run([sys.executable, str(BENCH / bench), *args], capture_output=True,
@@ -51,3 +52,32 @@ def test_soak_puts_readings_on_simulated_time_and_averages_by_hour():
                 {"name": "world", "sim_t": 4000.0, "rss_mb": 90.0},
                 {"name": "agent 0", "sim_t": float("nan"), "rss_mb": 30.0}]
     assert soak.memory_at(readings, 3600.0) == {"world": 80.0}
+
+
+def test_soak_reads_the_recorders_lag_from_the_recording(tmp_path):
+    # the world stamps tick k at 1 + 0.01 k s; the recorder takes it 0.5 s later, then
+    # falls behind by 20 ms more a tick: the lag is read back from the MCAP file
+    sys.path.insert(0, str(BENCH))
+    import numpy as np
+    import soak
+
+    from recorder.writer import Recording, RunWriter
+    from report.load import load_run
+    from wire import Tick, encode
+
+    writer = RunWriter(tmp_path / "run.mcap")
+    rec = Recording(writer)
+    sent = [10**18 + k * 10**7 for k in range(41)]
+    for k in range(41):
+        tick = Tick(t=k * 0.1, k=k, live=[0], done=k == 40, wall_ns=sent[k])
+        rec.handle("world/tick", encode(tick), sent[k] + 5 * 10**8 + k * 2 * 10**7)
+    writer.close()
+    run = load_run(tmp_path / "run.mcap")
+    assert run.tick_recorded_ns.tolist() == [s + 5 * 10**8 + k * 2 * 10**7
+                                             for k, s in enumerate(sent)]
+    lag = soak.recorder_lag(run)
+    assert np.allclose(lag, 0.5 + 0.02 * np.arange(41))
+    by_hour = soak.hourly_lag(run.tick_t, lag, 2)
+    assert by_hour[0]["median_s"] == pytest.approx(0.9)
+    assert by_hour[0]["max_s"] == pytest.approx(1.3)
+    assert np.isnan(by_hour[1]["median_s"])
