@@ -4,7 +4,8 @@ robot's depth map (``agent.depthmap``).
 Five motions: (1) ENTER: forward until the upward sensor sees the ice edge (at most
 ``max_search_m``: a robot whose pose has drifted off the ice's end or side would
 otherwise drive on for ever; it turns back to where it began and goes on with the
-sweep, recording nothing);
+sweep, recording nothing; an agent started with its robot under the ice turns at once
+and goes out to find the edge);
 (2) UNDER: on under the ice while algae is seen, at least ``min_depth_m``;
 (3) TURN_UNDER: a 180 degree arc; (4) EXIT: back out until ``margin_out_m`` past
 the edge (if the ice never ends, after ``max_depth_m`` plus ``max_search_m``);
@@ -64,7 +65,7 @@ class Transition:
 
 TRANSITIONS: tuple[Transition, ...] = (
     Transition(Motion.ENTER, Motion.UNDER, "_sees_the_ice", same_tick=True),
-    Transition(Motion.ENTER, Motion.TURN_UNDER, "_searched_too_far", same_tick=True),
+    Transition(Motion.ENTER, Motion.TURN_UNDER, "_turns_back", same_tick=True),
     Transition(Motion.UNDER, Motion.TURN_UNDER, "_deep_enough", same_tick=True),
     Transition(Motion.TURN_UNDER, Motion.EXIT, "_arc_done", same_tick=False),
     Transition(Motion.EXIT, Motion.TURN_OUT, "_out_far_enough", same_tick=True),
@@ -274,6 +275,9 @@ class Patrol:
         # Set while passes find no edge (nothing to measure): where the first of them
         # began, which each way out returns to.
         self.return_y: float | None = None
+        # Until its first tick: the robot stands where it stood when the agent began
+        # (a restart may find it anywhere, under the ice too).
+        self.placed = True
         self.sweeps = 0  # reversals so far
         self.passes = config.passes_per_sweep  # this sweep's, from TeamInput.passes
         self._deepest: tuple[tuple[int, int, int] | None, float] = (None, 0.0)  # a cache
@@ -682,12 +686,15 @@ class Patrol:
             leg.start_y = tick.y
         if not tick.ice:
             leg.from_water = True
+        placed, self.placed = self.placed, False
+        if placed and self._placed_under_the_ice(tick):
+            return Motion.TURN_UNDER
         if self._sees_the_ice(tick):
             y, prev_y = tick.y, tick.prev_y
             # The edge lies between this tick and the last one: take the middle.
             leg.entry_y = self._sensed(y, prev_y, tick.team.dt)
-            # A leg that began under the ice (an agent started where its robot
-            # stood) crossed no edge: it measures nothing.
+            # A later leg that began under the ice (an edge that bends below the
+            # pass line) crossed no edge: it measures nothing.
             leg.measures = leg.from_water
             if leg.measures:
                 self.depth_map.cross(tick.x, leg.entry_y,
@@ -704,6 +711,18 @@ class Patrol:
 
     def _sees_the_ice(self, tick: Tick) -> bool:
         return tick.ice
+
+    def _placed_under_the_ice(self, tick: Tick) -> bool:
+        """An agent started where its robot stood under the ice (a restart) knows
+        neither how deep it is nor where the edge is: it turns and goes out to find the
+        edge (EXIT ends past it) rather than on, deeper, where a turn depth counted from
+        where it stands may pass the ice's far side, which it would take for the edge.
+        Asked on the first tick only (``placed``)."""
+        return tick.ice and not self.in_leg.from_water
+
+    def _turns_back(self, tick: Tick) -> bool:
+        return ((self.placed and self._placed_under_the_ice(tick))
+                or self._searched_too_far(tick))
 
     def _searched_too_far(self, tick: Tick) -> bool:
         start = self.in_leg.start_y

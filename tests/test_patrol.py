@@ -442,15 +442,43 @@ def test_a_robot_counts_sweeps_with_its_lower_neighbour():
 
 
 def test_a_way_in_that_began_under_the_ice_measures_nothing():
-    """An agent started where its robot stood (a restart) may begin under the ice: it
-    crossed no edge, so neither the edge nor the depth of that leg is recorded."""
+    """A later way in that begins under the ice (an edge that bends below the pass
+    line) crossed no edge, so neither the edge nor the depth of that leg is recorded."""
     cfg = PatrolConfig()
     dm = DepthMap(0.0, 0.1, cfg.min_depth_m)
     patrol = Patrol(cfg, dm, x=0.55)
+    patrol.step(0.55, -0.5, math.pi / 2, False, False, 0.0, 2.0)  # its first tick: water
+    patrol.in_leg = InLeg()  # a new way in, begun under the ice
     track = [(1.0 + 0.05 * i, math.pi / 2, True, i < 3) for i in range(12)]
     motions = drive(patrol, track)
     assert Motion.UNDER in motions and patrol.last_depth is not None
     assert dm.depths == {} and dm.crossings == {}
+
+
+def test_an_agent_started_under_the_ice_goes_out_to_find_the_edge_first():
+    """A restart finds its robot wherever it stood, here 2.4 m under the 3 m of ice of
+    half-algae (y = 0 is the edge, y = 3 the map's far side) with nothing known. It
+    turns and heads out, crosses the real edge and patrols it; it never reaches the
+    ice's far side (which, going on deeper from where it stood, a 24-hour chaos run's
+    restarted robots took for the edge and patrolled for good, 100 m off the map)."""
+    gmap = load_map("half-algae")
+    world = World(gmap, 1, "in-phase", seed=1, odom_noise=0.0)
+    x0, y0, _ = world.truth(0)
+    world.move(0, 1.0 - x0, 2.4 - y0)
+    assert world.sense(0).ice
+    ctrl = Controller(0, 0.0, 2.0, 0.0, 6.0, world.truth(0)[0])
+    ys = []
+    for _ in range(1200):
+        x, y, th = world.truth(0)
+        r = world.sense(0)
+        out = ctrl.step(0.1, x, y, th, r.ice, r.algae, None, None, False, True)
+        world.step({0: (out.v, out.omega)}, 0.1)
+        ys.append(world.truth(0)[1])
+    assert max(ys) < 2.4 + 2 * PatrolConfig().max_turn_radius_m
+    assert min(ys) < -0.1  # it went out past the edge
+    crossings = [y for seen in ctrl.depth_map.crossings.values() for _, y, _ in seen]
+    assert crossings and all(abs(y) < 0.05 for y in crossings)  # the real edge
+    assert max(ys[-300:]) < 1.5 + 0.3 + 2 * PatrolConfig().max_turn_radius_m
 
 
 def test_a_robot_hurrying_to_catch_up_measures_nothing_slowly():
