@@ -16,6 +16,7 @@ from simworld.procedural import (
     AMPLITUDE_RANGE_M,
     CELL_RANGE_M,
     EDGES,
+    LENGTH_LIMITS_M,
     LENGTH_RANGE_M,
     MapSpec,
     procedural_map,
@@ -81,9 +82,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--length",
-        type=_number_in(*LENGTH_RANGE_M),
+        type=_number_in(*LENGTH_LIMITS_M),
         metavar="M",
-        help=f"edge length, {LENGTH_RANGE_M[0]:g} to {LENGTH_RANGE_M[1]:g} m (default: drawn)",
+        help=f"edge length, {LENGTH_LIMITS_M[0]:g} to {LENGTH_LIMITS_M[1]:g} m (default: "
+        f"drawn, {LENGTH_RANGE_M[0]:g} to {LENGTH_RANGE_M[1]:g})",
     )
     p.add_argument(
         "--edge",

@@ -29,7 +29,9 @@ from simworld.maps import (
 )
 
 PREFIX = "procedural:"
-LENGTH_RANGE_M = (3.0, 30.0)
+LENGTH_RANGE_M = (3.0, 30.0)  # what from_seed draws and the general suite deals
+# what a map may be given: long enough for a hundred robots at 0.6 m each
+LENGTH_LIMITS_M = (3.0, 60.0)
 AMPLITUDE_RANGE_M = (0.0, 0.6)
 DRAWN_AMPLITUDE_M = (0.1, 0.6)  # from_seed's range for a sloped or curved edge
 EDGES = ("straight", "sloped", "curved")
@@ -64,7 +66,7 @@ class MapSpec:
     """One map of the family; refused with the field and its allowed range if out of it."""
 
     seed: int
-    length_m: float  # the edge's length along x, 3 to 30 m
+    length_m: float  # the edge's length along x, 3 to 60 m (drawn: 3 to 30)
     edge: str  # straight | sloped | curved
     amplitude_m: float  # sloped: total rise end to end; curved: max |deviation|; 0 to 0.6 m
     algae: str  # none | steps | ramps | blooms | random
@@ -75,7 +77,7 @@ class MapSpec:
         for key, value in (("length", self.length_m), ("amplitude", self.amplitude_m)):
             if isinstance(value, bool) or not isinstance(value, int | float):
                 raise MapError(f"{key} must be a number of metres, got {value!r}")
-        lo, hi = LENGTH_RANGE_M
+        lo, hi = LENGTH_LIMITS_M
         if not lo <= self.length_m <= hi:
             raise MapError(f"length must be in [{lo:g}, {hi:g}] m, got {self.length_m!r}")
         if self.edge not in EDGES:
