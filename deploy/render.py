@@ -188,6 +188,60 @@ def access_control(fleet: Fleet) -> dict[str, Any]:
             "subjects": subjects, "policies": policies}
 
 
+def router_common_name(index: int) -> str:
+    """The certificate common name of router ``index`` of a mesh (``mesh_router_config``);
+    a single base station's router is ``Fleet.common_name(None)``."""
+    return f"btrack-router-{index}"
+
+
+def router_files(index: int) -> tuple[str, str]:
+    """Certificate and key file of router ``index`` of a mesh, in the fleet's TLS dir."""
+    return f"router-{index}.pem", f"router-{index}.key"
+
+
+def mesh_rules(ns: str, routers: int) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """The rules and subject that let the routers of a mesh route for each other: every
+    message, both ways, on the fleet's keys. A router passes on only what its own
+    clients' rights let in, so what arrives from another router was checked there."""
+    everything = ["put", "delete", "declare_subscriber", "query", "reply",
+                  "declare_queryable", "liveliness_token", "declare_liveliness_subscriber",
+                  "liveliness_query"]
+    rules = [_rule(f"mesh-{flow}", flow, everything, [Keys(ns).everything()])
+             for flow in ("ingress", "egress")]
+    subject = {"id": "mesh", "cert_common_names": [router_common_name(i)
+                                                   for i in range(routers)]}
+    return rules, subject
+
+
+def mesh_router_config(fleet: Fleet, index: int, addresses: list[str],
+                       listen_host: str = "0.0.0.0") -> dict[str, Any]:
+    """Router ``index`` of a mesh of routers at ``addresses`` (one per site, all on the
+    fleet's port): ``router_config`` that also connects to every other router (a
+    router keeps trying a router that is down, so one restarted is meshed again), with
+    a certificate of its own to listen and connect with (``router_files``, common name
+    ``router_common_name``), and access control that gives the other routers of the
+    mesh the right to route (``mesh_rules``) beside every client's own."""
+    if not 0 <= index < len(addresses):
+        raise ValueError(f"router {index} is not one of the mesh's {len(addresses)}")
+    conf = router_config(fleet, listen_host)
+    proto = "tls" if fleet.tls.enabled else "tcp"
+    conf["connect"] = {"endpoints": [f"{proto}/{a}:{fleet.base.port}"
+                                     for i, a in enumerate(addresses) if i != index]}
+    if fleet.tls.enabled:
+        p = _tls_paths(fleet, *router_files(index))
+        conf["transport"]["link"]["tls"].update({
+            "listen_certificate": p["cert"], "listen_private_key": p["key"],
+            "connect_certificate": p["cert"], "connect_private_key": p["key"]})
+    if fleet.tls.access_control:
+        rules, subject = mesh_rules(fleet.namespace, len(addresses))
+        acl = conf["access_control"]
+        acl["rules"] += rules
+        acl["subjects"].append(subject)
+        acl["policies"].append({"id": "mesh", "rules": [r["id"] for r in rules],
+                                "subjects": ["mesh"]})
+    return conf
+
+
 def router_config(fleet: Fleet, listen_host: str = "0.0.0.0") -> dict[str, Any]:
     proto = "tls" if fleet.tls.enabled else "tcp"
     conf: dict[str, Any] = {
@@ -211,10 +265,13 @@ def router_config(fleet: Fleet, listen_host: str = "0.0.0.0") -> dict[str, Any]:
     return conf
 
 
-def client_config(fleet: Fleet, who: Robot | str, host: str | None = None) -> dict[str, Any]:
+def client_config(fleet: Fleet, who: Robot | str, host: str | None = None,
+                  fallbacks: tuple[str, ...] = ()) -> dict[str, Any]:
     """A client of the router: a robot's agent (and, with hardware, its Create's
     bridge), or a base station process on the router's own host (a role of
-    ``Fleet.base_roles``), each with its own certificate."""
+    ``Fleet.base_roles``), each with its own certificate. ``fallbacks``: the hosts of
+    other routers of a mesh, tried in turn when ``host``'s cannot be reached (a client
+    whose router goes down connects to the first of them that answers)."""
     proto = "tls" if fleet.tls.enabled else "tcp"
     robot = who if isinstance(who, Robot) else None
     if robot is None and who not in fleet.base_roles:
@@ -225,7 +282,8 @@ def client_config(fleet: Fleet, who: Robot | str, host: str | None = None) -> di
     lease = fleet.lease_s if robot is not None else fleet.base.lease_s
     conf: dict[str, Any] = {
         "mode": "client",
-        "connect": {"endpoints": [f"{proto}/{host}:{fleet.base.port}"]},
+        "connect": {"endpoints": [f"{proto}/{h}:{fleet.base.port}"
+                                  for h in dict.fromkeys((host, *fallbacks))]},
         "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
         # the holder of a liveliness token announces the lease its peers use to drop it
         "transport": {"link": {"tx": {"lease": int(lease * 1000)}},

@@ -5,6 +5,7 @@ is what a robot needs and no more; bad fleet files are refused by key and line."
 from __future__ import annotations
 
 import dataclasses
+import json
 import shutil
 import subprocess
 import sys
@@ -247,3 +248,33 @@ def test_a_hardware_fleets_localizer_takes_the_scans_at_their_measured_times() -
         env = next(v for k, v in render(f).items() if k.endswith("/base.env"))
         line = next(x for x in env.splitlines() if x.startswith("BTRACK_LOCALIZER_ARGS="))
         assert ("--timing measured" in line) is measured, line
+
+
+def test_a_mesh_router_connects_to_the_others_and_lets_only_them_route() -> None:
+    from deploy.render import client_config, mesh_router_config
+
+    fleet = parse(EXAMPLE.read_text())
+    addrs = ["10.0.0.1", "10.0.0.2", "10.0.0.3"]
+    conf = mesh_router_config(fleet, 1, addrs)
+    assert conf["connect"]["endpoints"] == ["tls/10.0.0.1:7447", "tls/10.0.0.3:7447"]
+    tls = conf["transport"]["link"]["tls"]
+    assert tls["connect_certificate"].endswith("/router-1.pem")
+    assert tls["listen_certificate"] == tls["connect_certificate"]
+    acl = conf["access_control"]
+    assert acl["default_permission"] == "deny"
+    subjects = {s["id"]: s["cert_common_names"] for s in acl["subjects"]}
+    assert subjects["mesh"] == ["btrack-router-0", "btrack-router-1", "btrack-router-2"]
+    # every client keeps exactly its own rights beside the mesh's
+    assert {k: v for k, v in subjects.items() if k != "mesh"} == {
+        s["id"]: s["cert_common_names"] for s in render_router_acl(fleet)["subjects"]}
+    mesh = [r for r in acl["rules"] if r["id"].startswith("mesh-")]
+    assert {f for r in mesh for f in r["flows"]} == {"ingress", "egress"}
+    assert all(r["key_exprs"] == ["btrack/lab1/**"] for r in mesh)
+    zenoh.Config.from_json5(json.dumps(conf))  # Zenoh takes it
+    with pytest.raises(ValueError, match="router 3"):
+        mesh_router_config(fleet, 3, addrs)
+    # a robot's client lists its own router first, then the others in turn, once each
+    robot = client_config(fleet, fleet.robot(2), host="10.0.0.3",
+                          fallbacks=("10.0.0.1", "10.0.0.3", "10.0.0.2"))
+    assert robot["connect"]["endpoints"] == [
+        "tls/10.0.0.3:7447", "tls/10.0.0.1:7447", "tls/10.0.0.2:7447"]
