@@ -41,7 +41,7 @@ def start(args: list[str], log: Path | None = None) -> subprocess.Popen[bytes]:
                             stdout=subprocess.PIPE, stderr=err, start_new_session=True)
 
 
-def end(proc: subprocess.Popen[bytes], grace_s: float = 5.0) -> None:
+def end(proc: subprocess.Popen[bytes] | subprocess.Popen[str], grace_s: float = 5.0) -> None:
     """End a process we started, by its pid: SIGTERM, then SIGKILL. One that has already
     exited (and been reaped) is left alone: its pid may be someone else's by now."""
     if proc.poll() is not None:
@@ -49,7 +49,8 @@ def end(proc: subprocess.Popen[bytes], grace_s: float = 5.0) -> None:
     kill_pid(proc.pid, grace_s, proc)
 
 
-def kill_pid(pid: int, grace_s: float = 5.0, proc: subprocess.Popen[bytes] | None = None) -> None:
+def kill_pid(pid: int, grace_s: float = 5.0,
+             proc: subprocess.Popen[bytes] | subprocess.Popen[str] | None = None) -> None:
     try:
         os.kill(pid, signal.SIGTERM)
     except ProcessLookupError:

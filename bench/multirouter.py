@@ -1,0 +1,421 @@
+"""A team across hosts behind a mesh of Zenoh routers, and one of the routers killed and
+restarted (issue 21, item 5).
+
+Hosts are Linux network namespaces on one switch (``tests.netns.Mesh``). Host k runs
+router k; host 0 also the world and the recorder (the base station). Robot i's agent
+runs on host i mod K and is a client of its host's router first and of the others, in
+turn, after it (``deploy.render.client_config``'s fallbacks), so the neighbours of a
+robot are behind other routers and every state crosses the mesh. Every link is mutual
+TLS with the fleet's access control on every router, which also lets the other routers
+of the mesh route (``deploy.render.mesh_router_config``). At ``--kill-at`` router
+``--kill`` is killed (SIGKILL: its links drop at once), at ``--restart-at`` started again.
+
+An observer in the caller's namespace (the operator's laptop, with the recorder's
+certificate) hears the world's ticks and the agents' states, stamped with its wall
+clock. It writes ``OUT/measured.json``:
+
+- ``phase_before_kill_rad``: the position phase error (eq. 3.1, from the recording:
+  mean |e| over the pairs) over the 10 simulated seconds before the kill, and
+  ``phase_last_quarter_rad`` over the run's last quarter;
+- ``silence_max_s``: the longest the observer heard nothing from a robot of the killed
+  router after the kill; ``links_*``: how many agents held their link to each router
+  before the kill, before the restart and near the end (from ``ss`` on each host);
+- ``detected_s``: wall seconds from the kill until the world's tick no longer lists the
+  killed router's robots; ``back_s``: until it lists every robot again;
+- ``unowned_max_s``: after the kill, the longest wall time during which the latest
+  segments of the robots the world lists leave a stretch of the edge over 5 cm
+  without an owner;
+- ``tiled_at_end``: the last states tile the edge, in order, every robot live.
+
+Needs root (``ip netns``); says why and exits 2 where namespaces cannot be made.
+
+    sudo .venv/bin/python bench/multirouter.py --robots 100 --routers 3 --out runs/mesh100
+    .venv/bin/python bench/multirouter.py --robots 6 --routers 3 --realtime --duration 60 \\
+        --kill-at 25 --restart-at 40 --out /tmp/mesh6    # what tests/test_multirouter.py runs
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import signal
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from deploy.certs import make_cert, make_fleet_certs  # noqa: E402
+from deploy.fleet import Fleet, parse  # noqa: E402
+from deploy.render import (  # noqa: E402
+    client_config,
+    mesh_router_config,
+    router_common_name,
+    router_files,
+)
+from tests import netns  # noqa: E402
+
+PORT = 7447
+GAP_M = 0.05  # a stretch of the edge this long without an owner is unowned
+
+
+@dataclass
+class Seen:
+    """What the observer received, stamped with its wall clock."""
+
+    ticks: list[tuple[float, float, tuple[int, ...]]] = field(default_factory=list)
+    # (wall, t, robot, lo, hi, lower, upper)
+    states: list[tuple[float, float, int, float, float, int, int]] = field(default_factory=list)
+    lock: threading.Lock = field(default_factory=threading.Lock)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="bench/multirouter.py", description=__doc__.split("\n\n")[0])
+    p.add_argument("--robots", type=int, default=100)
+    p.add_argument("--routers", type=int, default=3, help="routers meshed, one a host (3)")
+    p.add_argument("--map", default=None,
+                   help="default: a straight edge with no algae, 0.6 m a robot (at least 3 m)")
+    p.add_argument("--duration", type=float, default=300.0, help="simulated s (300)")
+    p.add_argument("--kill-at", type=float, default=120.0, help="simulated s (120)")
+    p.add_argument("--restart-at", type=float, default=180.0, help="simulated s (180)")
+    p.add_argument("--kill", type=int, default=None, help="which router (the last)")
+    p.add_argument("--realtime", action="store_true",
+                   help="the world paces ticks on the wall clock (default: lockstep)")
+    p.add_argument("--lease", type=float, default=1.0, help="the robots' lease, s (1)")
+    p.add_argument("--cycle-s", type=float, default=None,
+                   help="fix the team's cycle (default: from the team's need)")
+    p.add_argument("--start", default="in-phase", help="the world's --start (in-phase)")
+    p.add_argument("--startup-timeout", type=float, default=300.0,
+                   help="wall s the world waits for every agent (300)")
+    p.add_argument("--wall-limit", type=float, default=3600.0,
+                   help="give up after this many wall seconds (3600)")
+    p.add_argument("--out", type=Path, required=True)
+    return p
+
+
+class MeshTeam:
+    def __init__(self, args: argparse.Namespace):
+        self.args = args
+        self.out: Path = args.out
+        self.k = args.routers
+        self.n = args.robots
+        self.kill = self.k - 1 if args.kill is None else args.kill
+        self.mesh = netns.Mesh(self.k, self.out / "logs")
+        self.ns = f"mesh{self.mesh.switch_ns[2:8]}"
+        length = max(3.0, round(0.6 * self.n, 2))
+        self.map = args.map or (f"procedural:1,length={length:g},edge=straight,"
+                                "amplitude=0,algae=none")
+        self.seen = Seen()
+        self.session: Any = None
+        self.routers: dict[int, Any] = {}
+        self.router_conf: dict[int, str] = {}
+        self.world: Any = None
+        self.recorder: Any = None
+        self.agents: dict[int, Any] = {}
+        self.kill_wall: float | None = None
+        self.restart_wall: float | None = None
+        self.kill_t: float | None = None
+        # which router each agent's link went to, sampled before the kill, before the
+        # restart and near the end (``connections``)
+        self.links: dict[str, dict[int, int | None]] = {}
+
+    def host_of(self, rid: int) -> int:
+        return rid % self.k
+
+    def fleet(self) -> Fleet:
+        robots = "".join(f'[[robots]]\nid = {i}\nhost = "robot{i}"\n' for i in range(self.n))
+        return parse(f'namespace = "{self.ns}"\nlease_s = {self.args.lease}\n[base]\n'
+                     f'host = "base"\naddress = "{self.mesh.addr(0)}"\nport = {PORT}\n'
+                     f'[tls]\ndir = "{self.out / "tls"}"\n{robots}')
+
+    def write(self, name: str, conf: dict[str, Any]) -> str:
+        path = self.out / "conf" / f"{name}.json5"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(conf, indent=1))
+        return str(path)
+
+    def start(self) -> None:
+        mesh, out = self.mesh, self.out
+        mesh.up()
+        fleet = self.fleet()
+        tls = out / "tls"
+        make_fleet_certs(fleet, tls, flat=True)
+        ca = (tls / "ca" / "ca.pem", tls / "ca" / "ca.key")
+        addrs = [mesh.addr(k) for k in range(self.k)]
+        for k in range(self.k):
+            pem, key = router_files(k)
+            make_cert(ca, tls / pem, tls / key, router_common_name(k),
+                      (addrs[k], "localhost", "127.0.0.1"))
+            self.router_conf[k] = self.write(f"router{k}", mesh_router_config(fleet, k, addrs))
+        for k in range(self.k):
+            self.start_router(k)
+        base = [mesh.addr(0)]
+        world, recorder = (self.write(role, client_config(fleet, role, host=base[0]))
+                           for role in ("world", "recorder"))
+        common = ["--ns", self.ns]
+        self.recorder = mesh.start(0, "recorder", ["record", "--out", str(out),
+                                                   "--zenoh-config", recorder, *common])
+        self.session = self._observe(client_config(fleet, "recorder", host=base[0]))
+        agent_args = ["--robots", str(self.n)]
+        if self.args.realtime:
+            agent_args += ["--neighbour-timeout", "0"]
+        if self.args.cycle_s:
+            agent_args += ["--cycle-s", repr(self.args.cycle_s)]
+        for i in range(self.n):
+            k = self.host_of(i)
+            order = [addrs[(k + j) % self.k] for j in range(self.k)]
+            conf = self.write(f"agent{i}", client_config(fleet, fleet.robot(i), host=order[0],
+                                                         fallbacks=tuple(order[1:])))
+            self.agents[i] = mesh.start(k, f"agent{i}", ["agent", "--id", str(i),
+                                                         *agent_args, "--zenoh-config", conf,
+                                                         *common])
+        world_args = ["world", "--robots", str(self.n), "--map", self.map, "--start",
+                      self.args.start, "--localization", "truth", "--duration",
+                      repr(self.args.duration), "--wait-recorder", "--startup-timeout",
+                      repr(self.args.startup_timeout), "--zenoh-config", world, *common]
+        if self.args.realtime:
+            world_args.append("--realtime")
+        self.world = mesh.start(0, "world", world_args)
+
+    def start_router(self, k: int) -> None:
+        self.routers[k] = self.mesh.start(k, f"router{k}" + ("-again" if k in self.routers
+                                                             else ""),
+                                          ["router", "--zenoh-config", self.router_conf[k]])
+
+    def _observe(self, conf: dict[str, Any]) -> Any:
+        import zenoh
+
+        from wire import AgentState, Keys, Tick, decode
+
+        deadline = time.monotonic() + 60
+        while True:
+            try:
+                session = zenoh.open(zenoh.Config.from_json5(json.dumps(conf)))
+                break
+            except zenoh.ZError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.2)
+        keys, seen = Keys(self.ns), self.seen
+
+        def on_tick(s: zenoh.Sample) -> None:
+            tick = decode(Tick, s.payload.to_bytes())
+            with seen.lock:
+                seen.ticks.append((time.monotonic(), tick.t, tuple(tick.live)))
+
+        def on_state(s: zenoh.Sample) -> None:
+            st = decode(AgentState, s.payload.to_bytes())
+            with seen.lock:
+                seen.states.append((time.monotonic(), st.t, st.robot, st.lo, st.hi,
+                                    st.lower, st.upper))
+
+        self._subs = [session.declare_subscriber(keys.world_tick(), on_tick),
+                      session.declare_subscriber(keys.state("*"), on_state)]
+        return session
+
+    def connections(self) -> dict[int, int | None]:
+        """Which router each agent holds its link to now, from ``ss`` on its host: the
+        router whose address its TCP connection to the port goes to (None: none)."""
+        import subprocess
+
+        pids = {p.pid: rid for rid, p in self.agents.items() if p.poll() is None}
+        by_addr = {self.mesh.addr(k): k for k in range(self.k)}
+        out: dict[int, int | None] = dict.fromkeys(range(self.n))
+        for ns in self.mesh.host_ns:
+            res = subprocess.run(["ip", "netns", "exec", ns, "ss", "-tnpH", "state",
+                                  "established"], capture_output=True, text=True, timeout=30)
+            for line in res.stdout.splitlines():
+                cols = line.split()
+                if len(cols) < 5 or not cols[3].endswith(f":{PORT}"):
+                    continue
+                for pid, rid in pids.items():
+                    if f"pid={pid}," in line:
+                        out[rid] = by_addr.get(cols[3].rsplit(":", 1)[0])
+        return out
+
+    def last_t(self) -> float:
+        with self.seen.lock:
+            return self.seen.ticks[-1][1] if self.seen.ticks else -1.0
+
+    def run(self) -> int:
+        """Start, kill and restart the router on time, wait for the world; its code."""
+        began = time.monotonic()
+        last_print = began
+        while self.world.poll() is None:
+            if time.monotonic() - began > self.args.wall_limit:
+                print("multirouter: the wall limit came first", file=sys.stderr)
+                return 1
+            t = self.last_t()
+            if self.kill_wall is None and t >= self.args.kill_at:
+                self.links["before_kill"] = self.connections()
+                self.routers[self.kill].send_signal(signal.SIGKILL)
+                self.kill_wall, self.kill_t = time.monotonic(), t
+                print(f"multirouter: t = {t:.1f} s: router {self.kill} killed", flush=True)
+            elif (self.kill_wall is not None and self.restart_wall is None
+                  and t >= self.args.restart_at):
+                self.routers[self.kill].wait(5)
+                self.links["before_restart"] = self.connections()
+                self.start_router(self.kill)
+                self.restart_wall = time.monotonic()
+                print(f"multirouter: t = {t:.1f} s: router {self.kill} started again",
+                      flush=True)
+            if "at_end" not in self.links and t >= self.args.duration - 3.0:
+                self.links["at_end"] = self.connections()
+            if time.monotonic() - last_print > 30:
+                last_print = time.monotonic()
+                print(f"multirouter: t = {t:.1f} s of {self.args.duration:g}, "
+                      f"{last_print - began:.0f} s of wall time", flush=True)
+            time.sleep(0.02)
+        return int(self.world.returncode)
+
+    def close(self) -> None:
+        if self.recorder is not None:
+            try:
+                self.recorder.wait(60)
+            except Exception:
+                pass
+        if self.session is not None:
+            closer = threading.Thread(target=self.session.close, daemon=True)
+            closer.start()
+            closer.join(3)
+        self.mesh.close()
+
+
+def unowned_max(ticks: list, states: list, since: float, edge: tuple[float, float],
+                n: int) -> float:
+    """The longest wall time after ``since`` that the latest segments of the robots the
+    latest tick lists leave a stretch over GAP_M of ``edge`` unowned."""
+    events = sorted([(r[0], 0, r) for r in ticks] + [(r[0], 1, r) for r in states],
+                    key=lambda e: e[0])
+    latest: dict[int, tuple[float, float]] = {}
+    live: tuple[int, ...] = tuple(range(n))
+    worst, gap_from = 0.0, None
+    for wall, kind, row in events:
+        if kind == 0:
+            live = row[2]
+        else:
+            latest[row[2]] = (row[3], row[4])
+        if wall < since:
+            continue
+        segs = sorted(latest[i] for i in live if i in latest)
+        covered, reach = bool(segs), edge[0]
+        for lo, hi in segs:
+            if lo > reach + GAP_M:
+                covered = False
+                break
+            reach = max(reach, hi)
+        covered = covered and reach >= edge[1] - GAP_M
+        if not covered and gap_from is None:
+            gap_from = wall
+        elif covered and gap_from is not None:
+            worst, gap_from = max(worst, wall - gap_from), None
+    if gap_from is not None:
+        worst = max(worst, events[-1][0] - gap_from)
+    return worst
+
+
+def measures(team: MeshTeam) -> dict[str, Any]:
+    import numpy as np
+
+    from report.load import load_run
+    from report.series import error_series
+
+    seen, n = team.seen, team.n
+    out: dict[str, Any] = {"robots": n, "routers": team.k, "killed_router": team.kill,
+                           "map": team.map, "realtime": team.args.realtime,
+                           "ticks_seen": len(seen.ticks), "states_seen": len(seen.states)}
+    s = error_series(load_run(team.out / "run.mcap"))
+    phase = np.abs(s.phase)
+    end = float(s.t[-1])
+    if team.kill_t is not None:
+        before = (s.t >= team.kill_t - 10.0) & (s.t < team.kill_t)
+        out["phase_before_kill_rad"] = float(np.nanmean(phase[:, before]))
+    out["phase_last_quarter_rad"] = float(np.nanmean(phase[:, s.t >= 0.75 * end]))
+    out["simulated_s"] = end
+    killed = {i for i in range(n) if team.host_of(i) == team.kill}
+    if team.kill_wall is not None:
+        kw = team.kill_wall
+        out["detected_s"] = next((r[0] - kw for r in seen.ticks
+                                  if r[0] >= kw and not killed & set(r[2])), None)
+        out["dropped_from_live"] = out["detected_s"] is not None
+        # the longest the observer heard nothing from a robot of the killed router
+        silence = []
+        for rid in killed:
+            walls = [r[0] for r in seen.states if r[2] == rid and r[0] >= kw - 1.0]
+            silence.append(max((b - a for a, b in zip(walls, walls[1:], strict=False)),
+                               default=math.inf))
+        out["silence_max_s"] = max(silence, default=None)
+        out["back_s"] = next((r[0] - kw for r in seen.ticks if r[0] >= kw
+                              and out["detected_s"] is not None
+                              and r[0] - kw > out["detected_s"] and len(r[2]) == n), None)
+        out["robots_on_killed_router"] = len(killed)
+        from simworld.maps import load_map
+
+        gmap = load_map(team.map)
+        out["unowned_max_s"] = unowned_max(seen.ticks, seen.states, kw,
+                                           (gmap.edge_lo, gmap.edge_hi), n)
+    if team.restart_wall is not None and seen.ticks:
+        after = [r for r in seen.ticks if r[0] >= team.restart_wall]
+        out["ticks_after_restart"] = len(after)
+        out["all_live_at_end"] = bool(after) and len(after[-1][2]) == n
+    for when, links in team.links.items():
+        out[f"links_{when}"] = {str(k): sum(1 for v in links.values() if v == k)
+                                for k in [*range(team.k), None]}
+    moved = [rid for rid in killed if team.links.get("before_restart", {}).get(rid)
+             not in (None, team.kill)]
+    out["killed_router_robots_moved"] = len(moved)
+    last = {}
+    for row in seen.states:
+        last[row[2]] = row
+    tiled = len(last) == n and all(
+        last[i][5] == (i - 1 if i > 0 else -1) and last[i][6] == (i + 1 if i + 1 < n else -1)
+        and (i + 1 == n or abs(last[i][4] - last[i + 1][3]) < GAP_M) for i in range(n))
+    out["tiled_at_end"] = bool(tiled)
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    why = netns.unavailable()
+    if why is not None:
+        print(f"multirouter: {why}", file=sys.stderr)
+        return 2
+    if args.routers < 2 or args.robots < args.routers:
+        print("multirouter: need at least 2 routers and a robot on each", file=sys.stderr)
+        return 2
+    if not 0 < args.kill_at < args.restart_at < args.duration:
+        print("multirouter: need 0 < --kill-at < --restart-at < --duration", file=sys.stderr)
+        return 2
+    args.out.mkdir(parents=True, exist_ok=True)
+
+    def on_term(*_: Any) -> None:  # end what it started and remove the namespaces
+        raise SystemExit(1)
+
+    signal.signal(signal.SIGTERM, on_term)
+    team = MeshTeam(args)
+    began = time.monotonic()
+    try:
+        team.start()
+        code = team.run()
+    finally:
+        team.close()
+        (args.out / "seen.json").write_text(json.dumps(
+            {"kill_wall": team.kill_wall, "restart_wall": team.restart_wall,
+             "ticks": team.seen.ticks, "states": team.seen.states}))
+    if code != 0:
+        print(f"multirouter: the world exited with {code}; see {args.out / 'logs'}",
+              file=sys.stderr)
+        return 1
+    m = measures(team)
+    m["wall_s"] = round(time.monotonic() - began, 1)
+    (args.out / "measured.json").write_text(json.dumps(m, indent=1))
+    print(json.dumps(m, indent=1))
+    return 0 if m.get("tiled_at_end") and math.isfinite(m["phase_last_quarter_rad"]) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
