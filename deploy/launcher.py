@@ -56,6 +56,10 @@ from wire.tickorder import TickOrder
 MAX_ROBOTS = 100  # one machine's processes: beyond this a run fails slowly, not at once
 PROGRESS_QUERY_S = 0.5  # longest wait for the recorder's answer to a progress query
 BACKGROUND_NICE = 10  # the recorder (the team's router) is off the lockstep's path
+# From this many robots on the agents are clients of the team's router, not peers: a
+# peer mesh holds a link per pair and at 50 robots ran 3x slower, its recorder missing
+# up to 1 % of the agents' states (BENCHMARKS.md, "Agents as clients of the router").
+CLIENT_AGENTS_FROM = 10
 STARTUP_S = 60.0
 RECORDER_STALL_S = 30.0  # a recorder that has taken no tick for this long is stopped
 WORLD_DT_S = 0.1  # the world's tick; btrack sim does not change it
@@ -119,6 +123,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="simulated seconds a restarted or joining agent takes to start; the "
                         f"world holds its clock while the process starts ({BOOT_S:g}: "
                         "measured, bench/agent_start.py)")
+    p.add_argument("--agents", choices=("auto", "peer", "client"), default="auto",
+                   help="how the agents join the bus: peers linked to each other (one hop "
+                   "a message, a link per pair), or clients of the team's router (one "
+                   "link each, two hops); auto: clients from "
+                   f"{CLIENT_AGENTS_FROM} robots on (BENCHMARKS.md) (default auto)")
     p.add_argument("--port", type=int, metavar="PORT",
                    help="the team's router listens on tcp/127.0.0.1:PORT (default: a free "
                         "port); other tools join the run there (OUT/bus.json says where)")
@@ -304,7 +313,7 @@ HIL_REFUSED = (("fault", "--fault"), ("chaos", "--chaos"), ("kidnap", "--kidnap"
                ("odom_noise", "--odom-noise"), ("odom_turn_noise", "--odom-turn-noise"),
                ("scanners", "--scanners"), ("sensors", "--sensors"),
                ("live", "--live"), ("clouds_every", "--clouds-every"),
-               ("engine", "--engine"), ("change", "--change"))
+               ("engine", "--engine"), ("change", "--change"), ("agents", "--agents"))
 
 
 def hil_refusal(args: argparse.Namespace) -> str | None:
@@ -487,9 +496,14 @@ def run(args: argparse.Namespace) -> int:
     # one hop per message; every message reaches the recorder in one hop too, with no
     # router process forwarding to it (BENCHMARKS.md).
     hub = f"tcp/127.0.0.1:{port}"
-    (out / "bus.json").write_text(json.dumps({"ns": ns, "connect": hub}) + "\n")
+    agents_mode = args.agents if args.agents != "auto" else (
+        "client" if args.robots >= CLIENT_AGENTS_FROM else "peer")
+    (out / "bus.json").write_text(json.dumps({"ns": ns, "connect": hub,
+                                              "agents": agents_mode}) + "\n")
     client = SessionOptions(ns=ns, mode="client", connect=(hub,), multicast=False)
     member = loopback_options(ns, port).to_args()
+    # the agents' own: as the other members, or clients of the router (a link each)
+    agent_member = member if agents_mode == "peer" else client.to_args()
     group = ProcessGroup(out / "logs")
     print(f"btrack sim: {args.robots} robots, map {args.map}, start {args.start}, "
           f"localization {args.localization}, {args.duration:g} s simulated -> {out}")
@@ -517,7 +531,8 @@ def run(args: argparse.Namespace) -> int:
             def agent_args(i: int) -> list[str]:
                 team = args.robots if i < args.robots else bodies
                 return ["agent", "--id", str(i), "--robots", str(team),
-                        *forward_flags(args, AGENT_FLAGS), *_sensor_args(args), *member]
+                        *forward_flags(args, AGENT_FLAGS), *_sensor_args(args),
+                        *agent_member]
 
             injector = Injector(session, keys, schedule, group, agent_args)
             for i in range(args.robots):

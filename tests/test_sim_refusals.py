@@ -125,6 +125,7 @@ HIL_REFUSED = {
     "live": ["--live"],
     "engine": ["--engine", "inprocess"],
     "change": ["--change", "grow:0.5@10-20"],
+    "agents": ["--agents", "client"],
 }
 HIL_PLANNED = {
     "robots": ["--robots", "2"],
