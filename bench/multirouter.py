@@ -191,15 +191,7 @@ class MeshTeam:
 
         from wire import AgentState, Keys, Tick, decode
 
-        deadline = time.monotonic() + 60
-        while True:
-            try:
-                session = zenoh.open(zenoh.Config.from_json5(json.dumps(conf)))
-                break
-            except zenoh.ZError:
-                if time.monotonic() > deadline:
-                    raise
-                time.sleep(0.2)
+        session = netns.open_when_up(conf, 60.0)
         keys, seen = Keys(self.ns), self.seen
 
         def on_tick(s: zenoh.Sample) -> None:

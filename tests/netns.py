@@ -11,12 +11,15 @@ it and ends every process it started, by pid, whatever happened before.
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
 import sys
+import time
 import uuid
 from pathlib import Path
+from typing import Any
 
 from tests.procutil import end
 
@@ -28,6 +31,32 @@ def stop(proc: subprocess.Popen) -> None:
         end(proc)
 
 LINKEMU = Path(__file__).resolve().parent / "linkemu.py"
+
+
+def spawn(ns: str, log: Path, argv: list[str], env: dict[str, str]
+          ) -> subprocess.Popen[bytes]:
+    """``argv`` inside namespace ``ns`` with exactly ``env``, its stderr in LOG.log and its
+    stdout in LOG.out; ``ip netns exec`` execs, so the pid is the command's own."""
+    log.parent.mkdir(parents=True, exist_ok=True)
+    with open(log.with_name(log.name + ".log"), "wb") as err, \
+            open(log.with_name(log.name + ".out"), "wb") as out:
+        return subprocess.Popen(["ip", "netns", "exec", ns, *argv], stdin=subprocess.DEVNULL,
+                                stdout=out, stderr=err, start_new_session=True, env=env)
+
+
+def open_when_up(conf: dict, wait_s: float = 30.0) -> Any:
+    """A Zenoh session of configuration ``conf``, tried again every 0.2 s for ``wait_s``
+    while its router is not up yet."""
+    import zenoh
+
+    deadline = time.monotonic() + wait_s
+    while True:
+        try:
+            return zenoh.open(zenoh.Config.from_json5(json.dumps(conf)))
+        except zenoh.ZError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.2)
 
 
 def _ip(*args: str, check: bool = True) -> subprocess.CompletedProcess[str]:
@@ -135,12 +164,7 @@ class Site:
         """The command line ``argv`` inside namespace ``ns`` with exactly the environment
         ``env`` (as systemd gives a unit its own), its output in the logs; ended by
         ``close`` unless the caller has ended it before."""
-        self.logs.mkdir(parents=True, exist_ok=True)
-        with open(self.logs / f"{name}.log", "wb") as err, \
-                open(self.logs / f"{name}.out", "wb") as out:
-            proc = subprocess.Popen(["ip", "netns", "exec", ns, *argv],
-                                    stdin=subprocess.DEVNULL, stdout=out, stderr=err,
-                                    start_new_session=True, env=env)
+        proc = spawn(ns, self.logs / name, argv, env)
         self.procs.append(proc)
         return proc
 
@@ -204,14 +228,8 @@ class Mesh:
 
     def start(self, k: int, name: str, args: list[str]) -> subprocess.Popen[bytes]:
         """``btrack ARGS`` on host ``k``, its output in the logs."""
-        self.logs.mkdir(parents=True, exist_ok=True)
-        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-        with open(self.logs / f"{name}.log", "wb") as err, \
-                open(self.logs / f"{name}.out", "wb") as out:
-            proc = subprocess.Popen(["ip", "netns", "exec", self.host_ns[k], sys.executable,
-                                     "-m", "btrack", *args],
-                                    stdin=subprocess.DEVNULL, stdout=out, stderr=err,
-                                    start_new_session=True, env=env)
+        proc = spawn(self.host_ns[k], self.logs / name, [sys.executable, "-m", "btrack", *args],
+                     {**os.environ, "PYTHONUNBUFFERED": "1"})
         self.procs.append(proc)
         return proc
 

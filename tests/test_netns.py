@@ -129,15 +129,7 @@ class Team:
     def _observe(self, conf: dict) -> zenoh.Session:
         from wire import AgentState, Keys, Tick, decode
 
-        deadline = time.monotonic() + 30
-        while True:
-            try:
-                session = zenoh.open(zenoh.Config.from_json5(json.dumps(conf)))
-                break
-            except zenoh.ZError:
-                if time.monotonic() > deadline:
-                    raise
-                time.sleep(0.2)
+        session = netns.open_when_up(conf, 30.0)
         keys, seen = Keys(self.ns), self.seen
 
         def on_tick(s: zenoh.Sample) -> None:
