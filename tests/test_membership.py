@@ -384,6 +384,10 @@ def test_membership_invariants_over_random_event_sequences(run):
                     # alone: only once it has stood still for the join wait
                     assert still_began is not None and now - still_began >= JOIN_WAIT_S - 1e-9
             if decision is ACT and stage_before is Stage.JOINING and k > 0:
+                # the claim is made with the neighbours as the decision left them (it may
+                # have dropped one waited for in vain)
+                lower, upper = m.neighbours()
+                views = {rid: m.latest(rid, k) for rid in (lower, upper) if rid is not None}
                 lo, hi = m.first_segment(k, *EDGE)
                 assert EDGE[0] <= lo < hi <= EDGE[1]
                 if any(v is not None for v in views.values()):
@@ -468,3 +472,18 @@ def test_on_a_ring_the_neighbours_wrap_and_the_first_arcs_are_equal() -> None:
     assert last.neighbours() == (2, 0) and last.decide(0, 0.0) is Decision.ACT
     with pytest.raises(ValueError, match="before its first tick"):
         last.close_ring()
+
+
+
+def test_a_joiner_claims_with_the_neighbours_its_decision_left():
+    # found by the property above (which judged the claim by the neighbours before the
+    # decision): robot 0 of a team of 1 joins mid-run; robot 1's state came (a
+    # candidate), robot 2 is live by its token but never spoke; robot 1 is waited for in
+    # vain and dropped, so robot 0 has heard no neighbour and takes its initial segment
+    m: Membership[SegmentView] = Membership(0, 1, neighbour_timeout_s=0.3)
+    m.alive(2, True)
+    assert m.heard(1, 198, seg(0.0, 3.1))
+    assert m.neighbours() == (None, 1)
+    assert m.decide(200, 0.0) is WAIT
+    assert m.decide(200, 0.3) is ACT and m.neighbours() == (None, 2)
+    assert m.first_segment(200, *EDGE) == initial_segment(0, 1, *EDGE)
