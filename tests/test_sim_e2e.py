@@ -37,16 +37,19 @@ def test_progress_lines_follow_the_run(half_algae_run):
     """The launcher's progress lines (from its queries to the recorder): simulated time
     going forward, the speed, the errors the agents see and who is alive."""
     _, result = half_algae_run
-    pattern = re.compile(rf"^t = +([\d.]+) / {HALF_S} s +([\d.]+)x real time +\|e_phi\| ([\d.]+) "
-                         r"rad +\|e_psi\| ([\d.]+) m\^2 +live \[0, 1, 2\]$")
+    # an error the recorder could not give at that moment (no state of the last tick in
+    # yet, under load) is printed as nan; the line still counts
+    pattern = re.compile(rf"^t = +([\d.]+) / {HALF_S} s +([\d.]+)x real time +\|e_phi\| "
+                         r"(nan|[\d.]+) rad +\|e_psi\| (nan|[\d.]+) m\^2 +live \[0, 1, 2\]$")
     lines = [m for m in map(pattern.match, result.stdout.splitlines()) if m]
     shown = [line for line in result.stdout.splitlines() if line.startswith("t =")]
     assert len(lines) >= 3, shown
     times = [float(m.group(1)) for m in lines]
     assert times == sorted(times) and times[-1] > times[0] and times[-1] <= HALF_S
     assert all(float(m.group(2)) > 0 for m in lines[1:])
-    # robot 1 starts 72 degrees ahead: the first line's phase error is the larger
-    assert float(lines[0].group(3)) > float(lines[-1].group(3))
+    # robot 1 starts 72 degrees ahead: the first known phase error is the larger
+    phases = [float(m.group(3)) for m in lines if m.group(3) != "nan"]
+    assert len(phases) >= 2 and phases[0] > phases[-1], shown
 
 
 def test_errors_shrink_half_algae_robot1_ahead(half_algae_run):
