@@ -40,10 +40,9 @@ import argparse
 import json
 import math
 import signal
+import subprocess
 import sys
-import threading
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -61,16 +60,6 @@ from tests import netns  # noqa: E402
 
 PORT = 7447
 GAP_M = 0.05  # a stretch of the edge this long without an owner is unowned
-
-
-@dataclass
-class Seen:
-    """What the observer received, stamped with its wall clock."""
-
-    ticks: list[tuple[float, float, tuple[int, ...]]] = field(default_factory=list)
-    # (wall, t, robot, lo, hi, lower, upper)
-    states: list[tuple[float, float, int, float, float, int, int]] = field(default_factory=list)
-    lock: threading.Lock = field(default_factory=threading.Lock)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -109,8 +98,7 @@ class MeshTeam:
         length = max(3.0, round(0.6 * self.n, 2))
         self.map = args.map or (f"procedural:1,length={length:g},edge=straight,"
                                 "amplitude=0,algae=none")
-        self.seen = Seen()
-        self.session: Any = None
+        self.seen: netns.Observer | None = None
         self.routers: dict[int, Any] = {}
         self.router_conf: dict[int, str] = {}
         self.world: Any = None
@@ -153,13 +141,13 @@ class MeshTeam:
             self.router_conf[k] = self.write(f"router{k}", mesh_router_config(fleet, k, addrs))
         for k in range(self.k):
             self.start_router(k)
-        base = [mesh.addr(0)]
-        world, recorder = (self.write(role, client_config(fleet, role, host=base[0]))
+        base = mesh.addr(0)
+        world, recorder = (self.write(role, client_config(fleet, role, host=base))
                            for role in ("world", "recorder"))
         common = ["--ns", self.ns]
         self.recorder = mesh.start(0, "recorder", ["record", "--out", str(out),
                                                    "--zenoh-config", recorder, *common])
-        self.session = self._observe(client_config(fleet, "recorder", host=base[0]))
+        self.seen = netns.Observer(client_config(fleet, "recorder", host=base), self.ns, 60.0)
         agent_args = ["--robots", str(self.n)]
         if self.args.realtime:
             agent_args += ["--neighbour-timeout", "0"]
@@ -186,34 +174,9 @@ class MeshTeam:
                                                              else ""),
                                           ["router", "--zenoh-config", self.router_conf[k]])
 
-    def _observe(self, conf: dict[str, Any]) -> Any:
-        import zenoh
-
-        from wire import AgentState, Keys, Tick, decode
-
-        session = netns.open_when_up(conf, 60.0)
-        keys, seen = Keys(self.ns), self.seen
-
-        def on_tick(s: zenoh.Sample) -> None:
-            tick = decode(Tick, s.payload.to_bytes())
-            with seen.lock:
-                seen.ticks.append((time.monotonic(), tick.t, tuple(tick.live)))
-
-        def on_state(s: zenoh.Sample) -> None:
-            st = decode(AgentState, s.payload.to_bytes())
-            with seen.lock:
-                seen.states.append((time.monotonic(), st.t, st.robot, st.lo, st.hi,
-                                    st.lower, st.upper))
-
-        self._subs = [session.declare_subscriber(keys.world_tick(), on_tick),
-                      session.declare_subscriber(keys.state("*"), on_state)]
-        return session
-
     def connections(self) -> dict[int, int | None]:
         """Which router each agent holds its link to now, from ``ss`` on its host: the
         router whose address its TCP connection to the port goes to (None: none)."""
-        import subprocess
-
         pids = {p.pid: rid for rid, p in self.agents.items() if p.poll() is None}
         by_addr = {self.mesh.addr(k): k for k in range(self.k)}
         out: dict[int, int | None] = dict.fromkeys(range(self.n))
@@ -229,10 +192,6 @@ class MeshTeam:
                         out[rid] = by_addr.get(cols[3].rsplit(":", 1)[0])
         return out
 
-    def last_t(self) -> float:
-        with self.seen.lock:
-            return self.seen.ticks[-1][1] if self.seen.ticks else -1.0
-
     def run(self) -> int:
         """Start, kill and restart the router on time, wait for the world; its code."""
         began = time.monotonic()
@@ -241,7 +200,7 @@ class MeshTeam:
             if time.monotonic() - began > self.args.wall_limit:
                 print("multirouter: the wall limit came first", file=sys.stderr)
                 return 1
-            t = self.last_t()
+            t = self.observed().last_t()
             if self.kill_wall is None and t >= self.args.kill_at:
                 self.links["before_kill"] = self.connections()
                 self.routers[self.kill].send_signal(signal.SIGKILL)
@@ -270,11 +229,13 @@ class MeshTeam:
                 self.recorder.wait(60)
             except Exception:
                 pass
-        if self.session is not None:
-            closer = threading.Thread(target=self.session.close, daemon=True)
-            closer.start()
-            closer.join(3)
+        if self.seen is not None:
+            self.seen.close()
         self.mesh.close()
+
+    def observed(self) -> netns.Observer:
+        assert self.seen is not None, "the observer opens as the team starts"
+        return self.seen
 
 
 def unowned_max(ticks: list, states: list, since: float, edge: tuple[float, float],
@@ -316,7 +277,7 @@ def measures(team: MeshTeam) -> dict[str, Any]:
     from report.load import load_run
     from report.series import error_series
 
-    seen, n = team.seen, team.n
+    seen, n = team.observed(), team.n
     out: dict[str, Any] = {"robots": n, "routers": team.k, "killed_router": team.kill,
                            "map": team.map, "realtime": team.args.realtime,
                            "ticks_seen": len(seen.ticks), "states_seen": len(seen.states)}
@@ -395,9 +356,10 @@ def main(argv: list[str] | None = None) -> int:
         code = team.run()
     finally:
         team.close()
-        (args.out / "seen.json").write_text(json.dumps(
-            {"kill_wall": team.kill_wall, "restart_wall": team.restart_wall,
-             "ticks": team.seen.ticks, "states": team.seen.states}))
+        if team.seen is not None:
+            (args.out / "seen.json").write_text(json.dumps(
+                {"kill_wall": team.kill_wall, "restart_wall": team.restart_wall,
+                 "ticks": team.seen.ticks, "states": team.seen.states}))
     if code != 0:
         print(f"multirouter: the world exited with {code}; see {args.out / 'logs'}",
               file=sys.stderr)

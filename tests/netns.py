@@ -16,10 +16,10 @@ import os
 import shutil
 import subprocess
 import sys
+import threading
 import time
 import uuid
 from pathlib import Path
-from typing import Any
 
 from tests.procutil import end
 
@@ -44,19 +44,55 @@ def spawn(ns: str, log: Path, argv: list[str], env: dict[str, str]
                                 stdout=out, stderr=err, start_new_session=True, env=env)
 
 
-def open_when_up(conf: dict, wait_s: float = 30.0) -> Any:
-    """A Zenoh session of configuration ``conf``, tried again every 0.2 s for ``wait_s``
-    while its router is not up yet."""
-    import zenoh
+class Observer:
+    """The operator's laptop: a Zenoh session of configuration ``conf`` (tried again every
+    0.2 s for ``wait_s`` while its router is not up yet) that hears the world's ticks
+    and the agents' states of namespace ``ns``, each stamped with its wall clock:
+    ``ticks`` as (wall, t, live ids), ``states`` as (wall, t, robot, lo, hi, lower,
+    upper). ``close`` ends the session, waiting at most 3 s."""
 
-    deadline = time.monotonic() + wait_s
-    while True:
-        try:
-            return zenoh.open(zenoh.Config.from_json5(json.dumps(conf)))
-        except zenoh.ZError:
-            if time.monotonic() > deadline:
-                raise
-            time.sleep(0.2)
+    def __init__(self, conf: dict, ns: str, wait_s: float = 30.0):
+        import zenoh
+
+        from wire import AgentState, Keys, Tick, decode
+
+        self.ticks: list[tuple[float, float, tuple[int, ...]]] = []
+        self.states: list[tuple[float, float, int, float, float, int, int]] = []
+        self.lock = threading.Lock()
+        deadline = time.monotonic() + wait_s
+        while True:
+            try:
+                self.session = zenoh.open(zenoh.Config.from_json5(json.dumps(conf)))
+                break
+            except zenoh.ZError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.2)
+
+        def on_tick(s: zenoh.Sample) -> None:
+            tick = decode(Tick, s.payload.to_bytes())
+            with self.lock:
+                self.ticks.append((time.monotonic(), tick.t, tuple(tick.live)))
+
+        def on_state(s: zenoh.Sample) -> None:
+            st = decode(AgentState, s.payload.to_bytes())
+            with self.lock:
+                self.states.append((time.monotonic(), st.t, st.robot, st.lo, st.hi,
+                                    st.lower, st.upper))
+
+        keys = Keys(ns)
+        self._subs = [self.session.declare_subscriber(keys.world_tick(), on_tick),
+                      self.session.declare_subscriber(keys.state("*"), on_state)]
+
+    def last_t(self) -> float:
+        """The simulated time of the last tick heard; -1 before the first."""
+        with self.lock:
+            return self.ticks[-1][1] if self.ticks else -1.0
+
+    def close(self) -> None:
+        closer = threading.Thread(target=self.session.close, daemon=True)
+        closer.start()
+        closer.join(3)
 
 
 def _ip(*args: str, check: bool = True) -> subprocess.CompletedProcess[str]:

@@ -474,7 +474,6 @@ def test_on_a_ring_the_neighbours_wrap_and_the_first_arcs_are_equal() -> None:
         last.close_ring()
 
 
-
 def test_a_joiner_claims_with_the_neighbours_its_decision_left():
     # found by the property above (which judged the claim by the neighbours before the
     # decision): robot 0 of a team of 1 joins mid-run; robot 1's state came (a

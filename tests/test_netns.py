@@ -19,12 +19,10 @@ import json
 import math
 import threading
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pytest
-import zenoh
 
 from deploy.certs import make_cert, make_fleet_certs
 from deploy.fleet import Fleet, parse
@@ -57,25 +55,13 @@ TAKE_MARGIN_S = 6.0
 REJOIN_BOUND_S = 14.0  # rejoins take 2-2.5 s; the run ends 17 s after the link returns
 
 
-@dataclass
-class Seen:
-    """What the observer (the operator's laptop) received, stamped with wall time."""
-
-    ticks: list[tuple[float, float, tuple[int, ...]]] = field(default_factory=list)
-    states: list[tuple[float, float, int, float, float, int, int]] = field(default_factory=list)
-
-    def last_t(self) -> float:
-        return self.ticks[-1][1] if self.ticks else -1.0
-
-
 class Team:
     def __init__(self, name: str, tmp: Path, impaired: bool):
         self.name, self.impaired = name, impaired
         self.dir = tmp / name
         self.site = netns.Site(ROBOTS, self.dir / "logs")
         self.ns = unique_ns()
-        self.seen = Seen()
-        self.session: zenoh.Session | None = None
+        self.seen: netns.Observer | None = None
         self.procs: dict[str, object] = {}
         self.cut_wall: float | None = None
         self.rejoin_wall: float | None = None
@@ -110,7 +96,8 @@ class Team:
         b = site.base_ns
         self.procs["router"] = site.start(b, "router", ["router", "--zenoh-config", router])
         # the operator's laptop hears what the recorder does (and may put nothing)
-        self.session = self._observe(client_config(fleet, "recorder", host=site.mgmt_addr))
+        self.seen = netns.Observer(client_config(fleet, "recorder", host=site.mgmt_addr),
+                                   self.ns)
         common = ["--ns", self.ns]
         self.procs["recorder"] = site.start(b, "recorder", ["record", "--out", str(self.dir),
                                                             "--zenoh-config", recorder,
@@ -126,27 +113,9 @@ class Team:
                                                       *WORLD_ARGS, "--zenoh-config", world,
                                                       *common])
 
-    def _observe(self, conf: dict) -> zenoh.Session:
-        from wire import AgentState, Keys, Tick, decode
-
-        session = netns.open_when_up(conf, 30.0)
-        keys, seen = Keys(self.ns), self.seen
-
-        def on_tick(s: zenoh.Sample) -> None:
-            tick = decode(Tick, s.payload.to_bytes())
-            seen.ticks.append((time.monotonic(), tick.t, tuple(tick.live)))
-
-        def on_state(s: zenoh.Sample) -> None:
-            st = decode(AgentState, s.payload.to_bytes())
-            seen.states.append((time.monotonic(), st.t, st.robot, st.lo, st.hi, st.lower,
-                                st.upper))
-
-        self._subs = [session.declare_subscriber(keys.world_tick(), on_tick),
-                      session.declare_subscriber(keys.state("*"), on_state)]
-        return session
-
     def step(self) -> None:
         """Cut robot 1's link, then restore it, at the scheduled simulated times."""
+        assert self.seen is not None
         t = self.seen.last_t()
         if self.cut_wall is None and t >= CUT_AT_S:
             self.site.link(1, up=False)
@@ -166,19 +135,18 @@ class Team:
         return self.procs["world"].poll() is None  # type: ignore[attr-defined]
 
     def close(self) -> None:
-        (self.dir / "seen.json").write_text(json.dumps(
-            {"cut_wall": self.cut_wall, "rejoin_wall": self.rejoin_wall,
-             "ticks": self.seen.ticks, "states": self.seen.states}))
+        if self.seen is not None:
+            (self.dir / "seen.json").write_text(json.dumps(
+                {"cut_wall": self.cut_wall, "rejoin_wall": self.rejoin_wall,
+                 "ticks": self.seen.ticks, "states": self.seen.states}))
         rec = self.procs.get("recorder")
         if rec is not None:
             try:
                 rec.wait(20)  # type: ignore[attr-defined]
             except Exception:
                 pass
-        if self.session is not None:
-            closer = threading.Thread(target=self.session.close, daemon=True)
-            closer.start()
-            closer.join(3)
+        if self.seen is not None:
+            self.seen.close()
         self.site.close()  # ends every process it started, by pid
 
 
