@@ -684,16 +684,33 @@ def _watch(args: argparse.Namespace, group: ProcessGroup, monitor: Monitor, worl
             continue
         monitor.ask()
         if monitor.progress is not None:
-            t = monitor.progress.t
-            speed = (t - last_t) / (now - last_wall) if now > last_wall else 0.0
-            ep, ew = monitor.errors()
-            line = (f"t = {t:7.1f} / {args.duration:g} s  {speed:6.1f}x real time  "
-                    f"|e_phi| {ep:.3f} rad  |e_psi| {ew:.3f} m^2  live {monitor.progress.live}")
-            print("\r" + line if tty else line, end="" if tty else "\n", flush=True)
-            last_print, last_t, last_wall = now, t, now
+            shown = _progress_line(monitor, args.duration, last_t, now - last_wall, every)
+            if shown is None:
+                continue  # the recorder's time has not moved yet: no news, ask again soon
+            print("\r" + shown if tty else shown, end="" if tty else "\n", flush=True)
+            last_print, last_t, last_wall = now, monitor.progress.t, now
     if world.proc.returncode != 0:
         return fail(group, world, "failed")
     return 0
+
+
+def _progress_line(monitor: Monitor, duration: float, last_t: float, wall_s: float,
+                   every: float) -> str | None:
+    """One progress line, or None while the recorder's simulated time stands where the
+    last line left it (it lags the world under load); a stand of five intervals is
+    shown as a stall, not as a speed of zero."""
+    p = monitor.progress
+    assert p is not None
+    t = p.t
+    if t <= last_t and wall_s < 5 * every:
+        return None
+    rate = (t - last_t) / wall_s
+    speed = f"{rate:6.{1 if rate >= 1 else 2}f}x real time" if t > last_t else (
+        f"stalled for {wall_s:.0f} s")
+    fmt = lambda x: "n/a" if math.isnan(x) else f"{x:.3f}"  # noqa: E731
+    ep, ew = monitor.errors()
+    return (f"t = {t:7.1f} / {duration:g} s  {speed}  |e_phi| {fmt(ep)} rad  "
+            f"|e_psi| {fmt(ew)} m^2  live {p.live}")
 
 
 def _wait_for_recorder(recorder: Child, monitor: Monitor) -> None:
