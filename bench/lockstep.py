@@ -1,7 +1,10 @@
 """The team's speed against the bus's ceiling, side by side, for each team size.
 
 The ceiling is a bare lockstep of the team's shape: one world-like process and N
-agent-like processes, each its own OS process, peers on loopback as in ``btrack sim``.
+agent-like processes, each its own OS process, linked as ``btrack sim`` links them
+(``--agents``): agents as peers of the world, or as clients of a router (a bare
+``btrack router``, where the team's router is its recorder) that forwards every message
+between them and the world, a peer of it.
 Every tick the world puts each agent its Sense, then the team's Truth; each agent,
 once it has its Sense of tick k and its two neighbours' states of tick k-1, puts its
 state and its command; the world, once it has every command, puts the Tick. The
@@ -11,6 +14,7 @@ membership, no recorder, no launcher. The team is ``btrack sim --localization tr
 on the same number of ticks. Both are timed from the world's first tick to its last.
 
     .venv/bin/python bench/lockstep.py [--robots 3 10 30 50] [--duration 30] [--repeat 1]
+        [--agents auto|peer|client]
 
 Prints, per team size, the ceiling's and the team's ticks per wall second, their
 speed-ups at 10 Hz control and the ratio team / ceiling (the issue's goal: 50 % or
@@ -42,7 +46,8 @@ import zenoh  # noqa: E402
 from decode import SAMPLES  # noqa: E402
 from speed import team_run  # noqa: E402
 
-from deploy.procs import Child, free_port, wait_listening  # noqa: E402
+from deploy.launcher import CLIENT_AGENTS_FROM  # noqa: E402
+from deploy.procs import Child, ProcessGroup, free_port, wait_listening  # noqa: E402
 from wire import AgentState, Cmd, Keys, Sense, Tick, Truth, decode, encode  # noqa: E402
 from wire.session import (  # noqa: E402
     SessionOptions,
@@ -95,7 +100,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="ceiling-then-team pairs per size (default 1)")
     p.add_argument("--map", default=DEFAULT_MAP, help="the team's map (default: a 30 m "
                    "straight procedural edge, room for every size)")
+    p.add_argument("--agents", choices=("auto", "peer", "client"), default="auto",
+                   help="the agents' links, ceiling and team alike, as btrack sim's "
+                   f"--agents (default auto: clients of the router from {CLIENT_AGENTS_FROM} "
+                   "robots on)")
     p.add_argument("--role", choices=["world", "agent"], help=argparse.SUPPRESS)
+    p.add_argument("--client", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--id", type=int, default=0, help=argparse.SUPPRESS)
     p.add_argument("--ns", help=argparse.SUPPRESS)
     p.add_argument("--port", type=int, help=argparse.SUPPRESS)
@@ -103,11 +113,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 # the bare processes -----------------------------------------------------------------
-def bare_world(ns: str, port: int, n: int, ticks: int) -> dict[str, Any]:
-    """The world's side: Sense to each agent and the Truth, every command, the Tick."""
+def bare_world(ns: str, port: int, n: int, ticks: int, routed: bool) -> dict[str, Any]:
+    """The world's side: Sense to each agent and the Truth, every command, the Tick. It
+    listens on ``port`` for its peers, or (``routed``) is a peer of the router there."""
     keys = Keys(ns)
-    opts = SessionOptions(ns=ns, mode="peer", listen=(f"tcp/127.0.0.1:{port}",),
-                          multicast=False)
+    opts = loopback_options(ns, port) if routed else SessionOptions(
+        ns=ns, mode="peer", listen=(f"tcp/127.0.0.1:{port}",), multicast=False)
     inbox: queue.SimpleQueue[bytes] = queue.SimpleQueue()
     alive: set[str] = set()
     all_alive = threading.Event()
@@ -156,9 +167,9 @@ def bare_world(ns: str, port: int, n: int, ticks: int) -> dict[str, Any]:
     return {"ticks": ticks, "wall_s": round(wall, 3)}
 
 
-def bare_agent(ns: str, port: int, robot: int, n: int) -> None:
+def bare_agent(ns: str, port: int, robot: int, n: int, client: bool) -> None:
     """An agent's side: its Sense and its neighbours' states in, its state and command
-    out; until SIGTERM."""
+    out; until SIGTERM. A peer of the process on ``port``, or its client."""
     keys = Keys(ns)
     inbox: queue.SimpleQueue[tuple[str, bytes]] = queue.SimpleQueue()
     neighbours = [r for r in (robot - 1, robot + 1) if 0 <= r < n]
@@ -169,7 +180,9 @@ def bare_agent(ns: str, port: int, robot: int, n: int) -> None:
         inbox.put(("stop", b""))
 
     signal.signal(signal.SIGTERM, on_sigterm)
-    with open_session(loopback_options(ns, port)) as session:
+    opts = SessionOptions(ns=ns, mode="client", connect=(f"tcp/127.0.0.1:{port}",),
+                          multicast=False) if client else loopback_options(ns, port)
+    with open_session(opts) as session:
         pub_state = declare_publisher(session, keys.state(robot))
         pub_cmd = declare_publisher(session, keys.cmd(robot))
         subs = [session.declare_subscriber(keys.sense(robot),
@@ -202,20 +215,29 @@ def bare_agent(ns: str, port: int, robot: int, n: int) -> None:
         del subs
 
 
-def ceiling(n: int, ticks: int) -> dict[str, Any]:
-    """One bare lockstep of n agents for ``ticks`` ticks: the world's summary."""
+def ceiling(n: int, ticks: int, client: bool) -> dict[str, Any]:
+    """One bare lockstep of n agents for ``ticks`` ticks: the world's summary. With
+    ``client`` the agents are clients of a router the world is a peer of."""
     port, ns = free_port(), f"bench/lockstep-{uuid.uuid4().hex[:8]}"
-    me = [sys.executable, str(Path(__file__).resolve()), "--ns", ns, "--port", str(port)]
+    me = [sys.executable, str(Path(__file__).resolve()), "--ns", ns, "--port", str(port),
+          *(["--client"] if client else [])]
     with tempfile.TemporaryDirectory() as tmp:
         out, err = Path(tmp) / "world.out", Path(tmp) / "world.log"
+        routers = ProcessGroup(Path(tmp) / "logs")
         procs: list[subprocess.Popen[bytes]] = []
         try:
+            if client:
+                hub = f"tcp/127.0.0.1:{port}"
+                router = routers.start("router", ["router", "--listen", hub, "--ns", ns,
+                                                  "--no-multicast"])
+                if not wait_listening(port, router, 30.0):
+                    raise SystemExit(f"bench: the router did not listen:\n{router.log_tail()}")
             with open(out, "wb") as o, open(err, "wb") as e:
                 world = subprocess.Popen([*me, "--role", "world", "--robots", str(n),
                                           "--duration", str(ticks * DT_S)],
                                          stdin=subprocess.DEVNULL, stdout=o, stderr=e)
             procs.append(world)
-            if not wait_listening(port, Child("world", world, err, out), 30.0):
+            if not client and not wait_listening(port, Child("world", world, err, out), 30.0):
                 raise SystemExit(f"bench: the bare world did not listen:\n{err.read_text()}")
             for i in range(n):
                 procs.append(subprocess.Popen([*me, "--role", "agent", "--id", str(i),
@@ -235,6 +257,7 @@ def ceiling(n: int, ticks: int) -> dict[str, Any]:
                 except subprocess.TimeoutExpired:
                     proc.kill()
                     proc.wait()
+            routers.stop_all()
 
 
 # side by side -----------------------------------------------------------------------
@@ -246,34 +269,37 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     ticks = round(args.duration / DT_S)
     if args.role == "world":
-        print(json.dumps(bare_world(args.ns, args.port, args.robots[0], ticks)), flush=True)
+        print(json.dumps(bare_world(args.ns, args.port, args.robots[0], ticks, args.client)),
+              flush=True)
         return 0
     if args.role == "agent":
-        bare_agent(args.ns, args.port, args.id, args.robots[0])
+        bare_agent(args.ns, args.port, args.id, args.robots[0], args.client)
         return 0
     print(f"bench: {ticks} ticks a run, ceiling then team, {args.repeat} pair(s) a size; "
           f"load {load()}", flush=True)
     rows = []
     for n in args.robots:
+        mode = args.agents if args.agents != "auto" else (
+            "client" if n >= CLIENT_AGENTS_FROM else "peer")
         bare, team = [], []
         for r in range(args.repeat):
-            print(f"bench: {n} robots, pair {r + 1}: bare lockstep ...", flush=True)
-            b = ceiling(n, ticks)
+            print(f"bench: {n} robots ({mode}s), pair {r + 1}: bare lockstep ...", flush=True)
+            b = ceiling(n, ticks, mode == "client")
             bare.append(b["ticks"] / b["wall_s"])
             print(f"bench: {n} robots, pair {r + 1}: {bare[-1]:.0f} ticks/s; team ...",
                   flush=True)
-            world, _ = team_run(n, args.duration, args.map, "truth")
+            world, _ = team_run(n, args.duration, args.map, "truth", ["--agents", mode])
             team.append(world["ticks"] / world["wall_s"])
             print(f"bench: {n} robots, pair {r + 1}: {team[-1]:.0f} ticks/s; load {load()}",
                   flush=True)
-        rows.append((n, statistics.median(bare), statistics.median(team),
+        rows.append((n, mode, statistics.median(bare), statistics.median(team),
                      statistics.median(t / b for t, b in zip(team, bare, strict=True))))
     print(f"\nload average at the end: {load()}")
-    print("| robots | ceiling ticks/s | ceiling speed-up | team ticks/s | team speed-up "
-          "| team / ceiling |")
-    print("| --- | --- | --- | --- | --- | --- |")
-    for n, b, t, ratio in rows:
-        print(f"| {n} | {b:.0f} | {b * DT_S:.1f}x | {t:.0f} | {t * DT_S:.1f}x "
+    print("| robots | agents | ceiling ticks/s | ceiling speed-up | team ticks/s "
+          "| team speed-up | team / ceiling |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    for n, mode, b, t, ratio in rows:
+        print(f"| {n} | {mode}s | {b:.0f} | {b * DT_S:.1f}x | {t:.0f} | {t * DT_S:.1f}x "
               f"| {100 * ratio:.0f} % |")
     return 0
 

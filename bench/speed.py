@@ -22,6 +22,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -86,12 +87,14 @@ def world_summary(out: Path) -> dict[str, Any]:
     return summary
 
 
-def team_run(n: int, duration: float, gmap: str, loc: str) -> tuple[dict[str, Any], float]:
-    """One ``btrack sim`` run: the world's closing line and the whole command's wall s."""
+def team_run(n: int, duration: float, gmap: str, loc: str, extra: Sequence[str] = ()
+             ) -> tuple[dict[str, Any], float]:
+    """One ``btrack sim`` run (``extra``: more of its options): the world's closing line
+    and the whole command's wall s."""
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "run"
         began = time.monotonic()
-        subprocess.run(sim_command(n, duration, gmap, loc, out), check=True,
+        subprocess.run([*sim_command(n, duration, gmap, loc, out), *extra], check=True,
                        stdout=subprocess.DEVNULL)
         return world_summary(out), time.monotonic() - began
 
