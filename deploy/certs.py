@@ -2,7 +2,8 @@
 ``openssl`` command (``btrack deploy certs``; the tests use it in a temp dir).
 
 The router's certificate (common name ``btrack-base``) names the base station's
-host, its address and localhost, since clients check the router's name; each base
+host, its address and localhost, since clients check the router's name (in a mesh
+of routers, router K's is ``btrack-router-K`` and names its own host); each base
 station process has its own (``btrack-world``, ``btrack-laser``, ``btrack-localizer``,
 ``btrack-recorder``) and robot i its (``btrack-robot-I``): the common name is what the
 router's access control grants rights to.
@@ -21,7 +22,7 @@ import tempfile
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
-from deploy.fleet import Fleet
+from deploy.fleet import Fleet, router_common_name, router_files
 
 CURVE = "prime256v1"
 
@@ -125,10 +126,16 @@ def make_fleet_certs(fleet: Fleet, out: Path, flat: bool = False) -> list[Path]:
         shutil.copy(ca[0], d / tls.ca)
         return d
 
+    sites = [(fleet.base.host, fleet.base.address),
+             *((r.host, r.address) for r in fleet.routers)]
+    for k, (host, address) in enumerate(sites):  # the routers: a mesh's are router-K
+        d = host_dir(host)
+        names = tuple(n for n in (host, address, "localhost", "127.0.0.1") if n)
+        pem, key = (router_files(k) if fleet.meshed else (tls.base_cert, tls.base_key))
+        name = router_common_name(k) if fleet.meshed else Fleet.common_name(None)
+        make_cert(ca, d / pem, d / key, name, names)
+        written += [d / tls.ca, d / pem, d / key]
     d = host_dir(fleet.base.host)
-    names = tuple(n for n in (fleet.base.host, fleet.base.address, "localhost", "127.0.0.1") if n)
-    make_cert(ca, d / tls.base_cert, d / tls.base_key, Fleet.common_name(None), names)
-    written += [d / tls.ca, d / tls.base_cert, d / tls.base_key]
     for role in fleet.base_roles:  # a client certificate each: its name is its rights
         pem, key = tls.role_files(role)
         make_cert(ca, d / pem, d / key, Fleet.common_name(role))

@@ -1,10 +1,12 @@
 """The fleet file: one TOML file that describes a lab's deployment.
 
 It names the base station (the Zenoh router, the world or the hardware bridges,
-the localizer, the recorder) and every robot computer (one agent each), the run
-namespace, the port, the lease and the certificates. ``load`` turns it into frozen
-dataclasses; anything wrong is refused with a ``FleetError`` that names the key and,
-where it can be found, the line at fault.
+the localizer, the recorder), every robot computer (one agent each), the run
+namespace, the port, the lease and the certificates; and, for a fleet over more than
+one site, the other routers (``[[routers]]``), meshed with the base station's, each
+robot a client of one of them (``router = K``) that falls back to the others. ``load``
+turns it into frozen dataclasses; anything wrong is refused with a ``FleetError`` that
+names the key and, where it can be found, the line at fault.
 """
 
 from __future__ import annotations
@@ -45,6 +47,26 @@ class Base:
 
 
 @dataclass(frozen=True)
+class Router:
+    """A router of another site, meshed with the base station's (router 0): robots of
+    that site connect to it, and to the other routers when it is down."""
+
+    host: str  # the name robots and the other routers connect to; in its certificate
+    address: str | None = None  # also in its certificate
+
+
+def router_common_name(index: int) -> str:
+    """The certificate common name of router ``index`` of a mesh (the base station's
+    is 0); a single base station's router is ``Fleet.common_name(None)``."""
+    return f"btrack-router-{index}"
+
+
+def router_files(index: int) -> tuple[str, str]:
+    """Certificate and key file of router ``index`` of a mesh, in the fleet's TLS dir."""
+    return f"router-{index}.pem", f"router-{index}.key"
+
+
+@dataclass(frozen=True)
 class Robot:
     """One robot computer: it runs ``btrack agent --id ID``."""
 
@@ -58,6 +80,7 @@ class Robot:
     # Which issue of its certificate the router accepts: raised to revoke the last one
     # (a stolen key), it names the next certificate apart from every earlier one.
     generation: int = 1
+    router: int = 0  # the router it connects to first: 0 the base station's, K [[routers]]'s
 
 
 @dataclass(frozen=True)
@@ -90,10 +113,33 @@ class Fleet:
     # so that robots of the team share k (their clocks NTP-synchronised)
     epoch: float | None = None
     bridge_args: tuple[str, ...] = ()  # hardware: more for every btrack bridge create
+    routers: tuple[Router, ...] = ()  # the other sites' routers, meshed with the base's
 
     @property
     def team(self) -> int:
         return len(self.robots)
+
+    @property
+    def meshed(self) -> bool:
+        """Whether the fleet has more than one router (``[[routers]]``)."""
+        return bool(self.routers)
+
+    @property
+    def router_hosts(self) -> tuple[str, ...]:
+        """Every router's host, the base station's first (router 0)."""
+        return (self.base.host, *(r.host for r in self.routers))
+
+    @property
+    def hosts(self) -> list[str]:
+        """Every host of the fleet, once each, sorted."""
+        return sorted({*self.router_hosts, *(r.host for r in self.robots)})
+
+    def routers_of(self, robot: Robot) -> tuple[str, ...]:
+        """The routers' hosts a robot connects to, in the order it tries them: its own,
+        then the next ones round the mesh (so the robots of a router that is down spread
+        by site, not all onto the base station)."""
+        hosts = self.router_hosts
+        return tuple(hosts[(robot.router + j) % len(hosts)] for j in range(len(hosts)))
 
     def robot(self, rid: int) -> Robot:
         for r in self.robots:
@@ -125,8 +171,9 @@ class Fleet:
         t = self.tls
         pairs = []
         if host == self.base.host:
-            pairs.append((t.base_cert, t.base_key))
+            pairs.append(router_files(0) if self.meshed else (t.base_cert, t.base_key))
             pairs += [t.role_files(role) for role in self.base_roles]
+        pairs += [router_files(k) for k, h in enumerate(self.router_hosts) if k and h == host]
         pairs += [(r.cert, r.key) for r in self.robots if r.host == host]
         files = {t.ca: False}
         for cert, key in pairs:
@@ -312,6 +359,7 @@ def parse(text: str, source: str = "fleet.toml") -> Fleet:
         raise t.fail("access_control", "needs enabled = true (robots are told apart by "
                                        "their certificates)")
 
+    routers = _routers(top, base)
     top.used.add("robots")
     raw = data.get("robots")
     if not isinstance(raw, list) or not raw:
@@ -332,6 +380,9 @@ def parse(text: str, source: str = "fleet.toml") -> Fleet:
             bridge_args=r.get("bridge_args", tuple, ()),
             generation=r.get("generation", int, 1,
                              check=lambda v: None if v >= 1 else "must be >= 1"),
+            router=r.get("router", int, 0, check=lambda v: None if 0 <= v <= len(routers) else
+                         f"must be 0 (the base station's) .. {len(routers)} (the "
+                         f"[[routers]] in order), got {v}"),
         )
         r.done()
         if any(o.id == rid for o in robots):
@@ -343,7 +394,27 @@ def parse(text: str, source: str = "fleet.toml") -> Fleet:
     top.done()
     return Fleet(namespace=namespace, base=base, robots=tuple(sorted(robots, key=lambda r: r.id)),
                  tls=tls, btrack=btrack, config_dir=config_dir, user=user, lease_s=lease_s,
-                 agent_args=agent_args, epoch=epoch, bridge_args=bridge_args)
+                 agent_args=agent_args, epoch=epoch, bridge_args=bridge_args,
+                 routers=routers)
+
+
+def _routers(top: _Reader, base: Base) -> tuple[Router, ...]:
+    """The ``[[routers]]`` tables: each host once, none the base station's."""
+    top.used.add("routers")
+    raw = top.data.get("routers", [])
+    if not isinstance(raw, list) or not all(isinstance(e, dict) for e in raw):
+        raise top.fail("routers", "expected [[routers]] tables")
+    routers: list[Router] = []
+    for n, entry in enumerate(raw):
+        r = _Reader(top.source, top.text, entry, ("routers", n))
+        router = Router(host=r.get("host", str, check=_host),
+                        address=r.get("address", str, None, check=_host))
+        r.done()
+        if router.host in (base.host, *(o.host for o in routers)):
+            raise r.fail("host", f"{router.host} has a router already (one per host; the "
+                                 "base station's is router 0)")
+        routers.append(router)
+    return tuple(routers)
 
 
 def load(path: str | Path) -> Fleet:

@@ -5,7 +5,10 @@ access control), the configuration its own processes use to reach the router, an
 environment file and the systemd units (router, world or hardware bridges,
 localizer, recorder). For each robot computer: its Zenoh configuration (client of
 the router, this robot's certificate, a short lease), its environment file and the
-``btrack-agent@.service`` template. Pure: a fleet in, a mapping path -> text out;
+``btrack-agent@.service`` template. A fleet with ``[[routers]]`` also gets, on each
+of those hosts, a router meshed with the base station's and the others
+(``mesh_router_config``), and each robot's configuration lists its own router first,
+then the others in turn. Pure: a fleet in, a mapping path -> text out;
 ``write`` puts it on disk under ``OUT/<host>/`` as the files would sit on that host.
 """
 
@@ -19,7 +22,7 @@ from pathlib import Path
 from string import Template
 from typing import Any
 
-from deploy.fleet import Fleet, Robot
+from deploy.fleet import Fleet, Robot, router_common_name, router_files
 from wire.keys import Keys
 
 UNIT_DIR = "etc/systemd/system"
@@ -188,17 +191,6 @@ def access_control(fleet: Fleet) -> dict[str, Any]:
             "subjects": subjects, "policies": policies}
 
 
-def router_common_name(index: int) -> str:
-    """The certificate common name of router ``index`` of a mesh (``mesh_router_config``);
-    a single base station's router is ``Fleet.common_name(None)``."""
-    return f"btrack-router-{index}"
-
-
-def router_files(index: int) -> tuple[str, str]:
-    """Certificate and key file of router ``index`` of a mesh, in the fleet's TLS dir."""
-    return f"router-{index}.pem", f"router-{index}.key"
-
-
 def mesh_rules(ns: str, routers: int) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """The rules and subject that let the routers of a mesh route for each other: every
     message, both ways, on the fleet's keys. A router passes on only what its own
@@ -316,16 +308,36 @@ def robot_units(fleet: Fleet) -> list[str]:
         ["btrack-bridge@.service"] if fleet.base.world == "hardware" else [])
 
 
+def _routers(fleet: Fleet, files: dict[str, str]) -> None:
+    """Every router's configuration on its host; a mesh's other routers (not the base
+    station's) with their unit too."""
+    cd = fleet.config_dir.strip("/")
+    hosts = list(fleet.router_hosts)
+    for k, host in enumerate(hosts):
+        if not fleet.meshed:
+            what, conf = "", router_config(fleet)
+        else:
+            what = (f"\nRouter {k} of a mesh of {len(hosts)} ({', '.join(hosts)}): it connects "
+                    f"to the others with its certificate (common name {router_common_name(k)}),"
+                    " which the others let route.")
+            conf = mesh_router_config(fleet, k, hosts)
+        files[f"{host}/{cd}/zenoh-router.json5"] = _json5(
+            f"Zenoh router of {'the base station ' if k == 0 else ''}{host}, team of "
+            f"{fleet.team}, namespace {fleet.namespace}.\nRobots connect with their own "
+            "certificate; the access control lets robot i publish only its own keys." + what,
+            conf)
+        if k:
+            files[f"{host}/{UNIT_DIR}/btrack-router.service"] = _unit(
+                "btrack-router.service", fleet)
+
+
 def render(fleet: Fleet) -> dict[str, str]:
     """Every file of every host: ``"<host>/<path on that host>" -> text``."""
     files: dict[str, str] = {}
     cd = fleet.config_dir.strip("/")
     b = fleet.base
     base = b.host
-    files[f"{base}/{cd}/zenoh-router.json5"] = _json5(
-        f"Zenoh router of the base station {base}, team of {fleet.team}, namespace "
-        f"{fleet.namespace}.\nRobots connect with their own certificate; the access control "
-        "lets robot i publish only its own keys.", router_config(fleet))
+    _routers(fleet, files)
     for role in fleet.base_roles:
         files[f"{base}/{cd}/zenoh-{role}.json5"] = _json5(
             f"Zenoh configuration of the base station's {role}: a client of the router on "
@@ -356,10 +368,12 @@ def render(fleet: Fleet) -> dict[str, str]:
     for name in units:
         files[f"{base}/{UNIT_DIR}/{name}"] = _unit(name, fleet)
     for r in fleet.robots:
+        first, *others = fleet.routers_of(r)
+        then = f" (then, when it is down, of {', '.join(others)} in turn)" if others else ""
         files[f"{r.host}/{cd}/zenoh-agent-{r.id}.json5"] = _json5(
             f"Zenoh configuration of robot {r.id}'s agent on {r.host}: a client of the router "
-            f"on {base}, with this robot's certificate and a {fleet.lease_s:g} s lease.",
-            client_config(fleet, r))
+            f"on {first}{then}, with this robot's certificate and a {fleet.lease_s:g} s "
+            "lease.", client_config(fleet, r, host=first, fallbacks=tuple(others)))
         files[f"{r.host}/{cd}/agent-{r.id}.env"] = _env({
             "ZENOH_CONFIG": f"{fleet.config_dir}/zenoh-agent-{r.id}.json5",
             "BTRACK_NS": fleet.namespace,
@@ -372,7 +386,7 @@ def render(fleet: Fleet) -> dict[str, str]:
         })
         for name in robot_units(fleet):
             files[f"{r.host}/{UNIT_DIR}/{name}"] = _unit(name, fleet)
-    for host in sorted({base, *(r.host for r in fleet.robots)}):
+    for host in fleet.hosts:
         mine = [k.split("/", 1)[1] for k in files if k.startswith(host + "/")]
         files[f"{host}/install.sh"] = install_script(fleet, host, mine)
     files["INSTALL.md"] = install_notes(fleet, units)
@@ -422,7 +436,7 @@ def install_script(fleet: Fleet, host: str, paths: list[str]) -> str:
 
 
 def install_notes(fleet: Fleet, base_units: list[str]) -> str:
-    hosts = sorted({fleet.base.host, *(r.host for r in fleet.robots)})
+    hosts = fleet.hosts
     tls = fleet.tls
     lines = [
         f"# Deploying namespace `{fleet.namespace}`: {fleet.team} robots", "",
@@ -440,6 +454,14 @@ def install_notes(fleet: Fleet, base_units: list[str]) -> str:
                   + "); robot i's `robot-I.pem`/`robot-I.key` on its computer (common name "
                   "`btrack-robot-I`). `btrack deploy certs FLEET.toml --out DIR` makes a CA "
                   "(in `DIR/ca/`: keep it off the hosts) and all of them, in this tree."]
+        if fleet.meshed:
+            lines += ["", "The routers are a mesh: router K's certificate is "
+                      "`router-K.pem`/`router-K.key` (common name `btrack-router-K`, names "
+                      "its host, its address and localhost), on its host ("
+                      + ", ".join(f"`{router_files(k)[0]}` on {h}"
+                                  for k, h in enumerate(fleet.router_hosts))
+                      + f"); the base station's router is router 0, with `router-0.pem` in "
+                      f"place of `{tls.base_cert}`."]
     lines += ["", "Every directory here is one host. Copy it to that host and run its "
               f"`install.sh` as root: it makes the service user `{fleet.user}` if it is "
               "missing and installs every file with the owner and mode its service reads it "
@@ -455,6 +477,11 @@ def install_notes(fleet: Fleet, base_units: list[str]) -> str:
                   f"by `{fleet.user}`)."]
     lines += ["", "Base station:", "", "    systemctl daemon-reload",
               f"    systemctl enable --now {' '.join(base_units)}", ""]
+    for k, host in enumerate(fleet.router_hosts[1:], start=1):
+        lines.append(f"Router {k} ({host}): `systemctl daemon-reload && "
+                     "systemctl enable --now btrack-router.service`")
+    if fleet.meshed:
+        lines.append("")
     for r in fleet.robots:
         mine = " ".join(u.replace("@.service", f"@{r.id}") for u in robot_units(fleet))
         lines.append(f"Robot {r.id} ({r.host}): `systemctl daemon-reload && "

@@ -28,13 +28,17 @@ def btrack(*args: str) -> subprocess.CompletedProcess[str]:
                           text=True, timeout=60)
 
 
-@pytest.fixture(scope="module")
-def rendered(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("render")
+def render_tree(fleet_file: Path, out: Path) -> Path:
+    """``btrack deploy render`` of a fleet file into ``out``."""
     # The units name the btrack command; point it at this venv's so verify finds it.
-    res = btrack("deploy", "render", str(EXAMPLE), "--out", str(out), "--btrack", str(BTRACK))
+    res = btrack("deploy", "render", str(fleet_file), "--out", str(out), "--btrack", str(BTRACK))
     assert res.returncode == 0, res.stderr
     return out
+
+
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory) -> Path:
+    return render_tree(EXAMPLE, tmp_path_factory.mktemp("render"))
 
 
 def test_every_host_gets_its_files(rendered: Path) -> None:
@@ -146,28 +150,40 @@ def test_render_is_deterministic() -> None:
     assert render(fleet) == render(fleet)
 
 
-def test_certs_for_the_fleet_chain_to_its_ca(tmp_path: Path) -> None:
+def make_certs(fleet_file: Path, out: Path) -> None:
+    """``btrack deploy certs`` of a fleet file into ``out`` (skipped without openssl)."""
     if shutil.which("openssl") is None:
         pytest.skip("no openssl command")
-    res = btrack("deploy", "certs", str(EXAMPLE), "--out", str(tmp_path))
+    res = btrack("deploy", "certs", str(fleet_file), "--out", str(out))
     assert res.returncode == 0, res.stderr
+
+
+def subject(pem: Path) -> str:
+    """A certificate's subject and alternative names, as openssl prints them."""
+    return subprocess.run(["openssl", "x509", "-noout", "-subject", "-ext", "subjectAltName",
+                           "-in", str(pem)], capture_output=True, text=True).stdout
+
+
+def chains(tls: Path, pem: str) -> None:
+    """The certificate ``pem`` of a host's TLS dir chains to the ``ca.pem`` beside it."""
+    ok = subprocess.run(["openssl", "verify", "-CAfile", str(tls / "ca.pem"), str(tls / pem)],
+                        capture_output=True, text=True)
+    assert ok.returncode == 0, ok.stderr
+
+
+def test_certs_for_the_fleet_chain_to_its_ca(tmp_path: Path) -> None:
+    make_certs(EXAMPLE, tmp_path)
     tls = tmp_path / "robot1.lab/etc/btrack/tls"
     assert sorted(p.name for p in tls.iterdir()) == ["ca.pem", "robot-1.key", "robot-1.pem"]
     base = tmp_path / "base.lab/etc/btrack/tls"
     assert sorted(p.name for p in base.iterdir()) == [
         "base.key", "base.pem", "ca.pem", "recorder.key", "recorder.pem", "world.key",
         "world.pem"]
-    world = subprocess.run(["openssl", "x509", "-noout", "-subject", "-in",
-                            str(base / "world.pem")], capture_output=True, text=True).stdout
-    assert "CN = btrack-world" in world
+    assert "CN = btrack-world" in subject(base / "world.pem")
     assert (tls / "robot-1.key").stat().st_mode & 0o077 == 0
     assert not list(tmp_path.glob("*.lab/**/ca.key"))  # the CA key stays off the hosts
-    ok = subprocess.run(["openssl", "verify", "-CAfile", str(tls / "ca.pem"),
-                         str(tls / "robot-1.pem")], capture_output=True, text=True)
-    assert ok.returncode == 0, ok.stderr
-    subj = subprocess.run(["openssl", "x509", "-noout", "-subject", "-ext", "subjectAltName",
-                           "-in", str(tmp_path / "base.lab/etc/btrack/tls/base.pem")],
-                          capture_output=True, text=True).stdout
+    chains(tls, "robot-1.pem")
+    subj = subject(base / "base.pem")
     assert "CN = btrack-base" in subj and "base.lab" in subj and "192.168.50.1" in subj
     # revoking robot 1: its generation raised, its certificate alone issued again by the CA
     fleet = tmp_path / "fleet.toml"
@@ -175,14 +191,14 @@ def test_certs_for_the_fleet_chain_to_its_ca(tmp_path: Path) -> None:
     before = (base / "world.pem").read_bytes()
     res = btrack("deploy", "certs", str(fleet), "--out", str(tmp_path), "--robot", "1")
     assert res.returncode == 0 and "generation 2" in res.stdout, res.stderr
-    subj = subprocess.run(["openssl", "x509", "-noout", "-subject", "-in",
-                           str(tls / "robot-1.pem")], capture_output=True, text=True).stdout
-    assert "CN = btrack-robot-1-g2" in subj
-    ok = subprocess.run(["openssl", "verify", "-CAfile", str(tls / "ca.pem"),
-                         str(tls / "robot-1.pem")], capture_output=True, text=True)
-    assert ok.returncode == 0 and (base / "world.pem").read_bytes() == before
+    assert "CN = btrack-robot-1-g2" in subject(tls / "robot-1.pem")
+    chains(tls, "robot-1.pem")
+    assert (base / "world.pem").read_bytes() == before
 
 
+# the last five: a fleet over sites ([[routers]]) with a bad router index, host or key
+SITES_HEAD = ('namespace = "a"\n[base]\nhost = "b"\n[[routers]]\nhost = "n"\n'
+              '[[routers]]\nhost = "s"\n')
 BAD = [
     ('namespace = "a"\n[base]\nhost = "b"\nbogus = 1\n[[robots]]\nid = 0\nhost = "r"\n',
      ":4: base.bogus: unknown key"),
@@ -207,6 +223,17 @@ BAD = [
      ":7: robots[0].port: must be an absolute path"),
     ('namespace = "a"\n[base]\nhost = "b"\n[[robots]]\nid = 0\nhost = "r"\ngeneration = 0\n',
      ":7: robots[0].generation: must be >= 1"),
+    (SITES_HEAD + '[[robots]]\nid = 0\nhost = "r"\nrouter = 3\n',
+     ":11: robots[0].router: must be 0 (the base station's) .. 2 (the [[routers]] in "
+     "order), got 3"),
+    (SITES_HEAD + '[[routers]]\nhost = "n"\n[[robots]]\nid = 0\nhost = "r"\n',
+     ":9: routers[2].host: n has a router already"),
+    ('namespace = "a"\n[base]\nhost = "b"\n[[routers]]\nhost = "b"\n'
+     '[[robots]]\nid = 0\nhost = "r"\n', ":5: routers[0].host: b has a router already"),
+    ('namespace = "a"\n[base]\nhost = "b"\n[[routers]]\nhost = "n"\nport = 1\n'
+     '[[robots]]\nid = 0\nhost = "r"\n', ":6: routers[0].port: unknown key"),
+    ('namespace = "a"\nrouters = 3\n[base]\nhost = "b"\n[[robots]]\nid = 0\nhost = "r"\n',
+     "routers: expected [[routers]] tables"),
 ]
 
 
@@ -278,3 +305,63 @@ def test_a_mesh_router_connects_to_the_others_and_lets_only_them_route() -> None
                           fallbacks=("10.0.0.1", "10.0.0.3", "10.0.0.2"))
     assert robot["connect"]["endpoints"] == [
         "tls/10.0.0.3:7447", "tls/10.0.0.1:7447", "tls/10.0.0.2:7447"]
+
+
+# a fleet over three sites: [[routers]] meshed with the base station's ---------------
+SITES = ROOT / "deploy" / "examples" / "fleet-sites.toml"
+SITE_ROUTERS = ("base.coast", "north.coast", "south.coast")
+
+
+@pytest.fixture(scope="module")
+def sites(tmp_path_factory) -> Path:
+    return render_tree(SITES, tmp_path_factory.mktemp("sites"))
+
+
+def test_a_fleet_over_sites_gives_every_router_host_a_meshed_router(sites: Path) -> None:
+    fleet = parse(SITES.read_text())
+    assert fleet.router_hosts == SITE_ROUTERS
+    assert {p.name for p in sites.iterdir() if p.is_dir()} == set(fleet.hosts)
+    for k, host in enumerate(SITE_ROUTERS):
+        path = sites / host / "etc/btrack/zenoh-router.json5"
+        conf = zenoh.Config.from_file(str(path))  # Zenoh takes it
+        text = str(conf).replace(" ", "")
+        assert f"/etc/btrack/tls/router-{k}.pem" in text, host
+        others = [h for h in SITE_ROUTERS if h != host]
+        for other in others:  # connects to every other router, by name
+            assert f"tls/{other}:7447" in text, (host, other)
+        assert f"tls/{host}:7447" not in text  # and not to itself
+        assert '"default_permission":"deny"' in text
+        assert "btrack-router-0" in text and "btrack-router-2" in text
+        # the other sites run only the router there; the base station its own services too
+        units = {p.name for p in (sites / host / "etc/systemd/system").iterdir()}
+        assert "btrack-router.service" in units
+        assert ("btrack-world.service" in units) is (k == 0)
+    install = (sites / "INSTALL.md").read_text()
+    assert "north.coast" in install and "router-1" in install
+
+
+def test_a_robot_connects_to_its_sites_router_first_then_round_the_mesh(sites: Path) -> None:
+    order = {0: SITE_ROUTERS, 1: SITE_ROUTERS[1:] + SITE_ROUTERS[:1],
+             3: SITE_ROUTERS[2:] + SITE_ROUTERS[:2]}
+    for rid, hosts in order.items():
+        path = sites / f"robot{rid}.coast/etc/btrack/zenoh-agent-{rid}.json5"
+        connect = json.loads(zenoh.Config.from_file(str(path)).get_json("connect"))
+        assert connect["endpoints"] == [f"tls/{h}:7447" for h in hosts], rid
+    # the single-router example is unchanged: one router, no mesh certificates
+    fleet = parse(EXAMPLE.read_text())
+    assert not fleet.meshed and fleet.routers_of(fleet.robot(2)) == ("base.lab",)
+
+
+def test_certs_for_a_fleet_over_sites_name_each_router(tmp_path: Path) -> None:
+    make_certs(SITES, tmp_path)
+    base = tmp_path / "base.coast/etc/btrack/tls"
+    names = sorted(p.name for p in base.iterdir())
+    assert "router-0.pem" in names and "base.pem" not in names and "world.pem" in names
+    for k, host in enumerate(SITE_ROUTERS):
+        tls = tmp_path / host / "etc/btrack/tls"
+        assert {f"router-{k}.pem", f"router-{k}.key", "ca.pem"} <= {p.name for p in tls.iterdir()}
+        subj = subject(tls / f"router-{k}.pem")
+        assert f"CN = btrack-router-{k}" in subj and host in subj, subj
+        chains(tls, f"router-{k}.pem")
+    north = {p.name for p in (tmp_path / "north.coast/etc/btrack/tls").iterdir()}
+    assert north == {"ca.pem", "router-1.key", "router-1.pem"}

@@ -35,6 +35,7 @@ from tests.unitfiles import host_files, reads
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLE = ROOT / "deploy" / "examples" / "fleet.toml"
+SITES = ROOT / "deploy" / "examples" / "fleet-sites.toml"
 BTRACK = str(Path(sys.executable).parent / "btrack")
 MAX_EXPOSURE = 3.0
 
@@ -197,7 +198,7 @@ def unit_needs(files: dict[str, str], fleet: Fleet, host: str) -> dict[str, set[
 
 def check_install(files: dict[str, str], fleet: Fleet, tree: Path | None) -> None:
     user, group = fleet.user, fleet.user  # useradd --user-group: a group of its name
-    hosts = {fleet.base.host, *(r.host for r in fleet.robots)}
+    hosts = fleet.hosts
     for host in hosts:
         done = read_install(files[f"{host}/install.sh"], user, group)
         # every file of the host, rendered or certificate, goes where it belongs
@@ -250,6 +251,22 @@ def test_install_sh_leaves_every_file_a_unit_reads_readable_by_its_user_only(
     check_install(render(example()), example(), None)
 
 
+def test_install_sh_of_a_fleet_over_sites_installs_each_routers_files(tmp_path: Path) -> None:
+    """Three routers meshed (``[[routers]]``): each router host installs its router's
+    configuration, unit and certificate, the base station its router-0 certificate."""
+    if shutil.which("openssl") is None:
+        pytest.skip("no openssl command")
+    fleet = dataclasses.replace(parse(SITES.read_text()), btrack=BTRACK)
+    files = render(fleet)
+    write(files, tmp_path)
+    make_fleet_certs(fleet, tmp_path)
+    check_install(files, fleet, tmp_path)
+    for k, host in enumerate(fleet.router_hosts):
+        done = read_install(files[f"{host}/install.sh"], fleet.user, fleet.user)
+        assert f"{fleet.tls.dir}/router-{k}.key" in done, host
+        assert f"{fleet.config_dir}/zenoh-router.json5" in done, host
+
+
 def test_install_sh_makes_a_recordings_directory_outside_var_lib() -> None:
     fleet = example()
     srv = dataclasses.replace(fleet, base=dataclasses.replace(fleet.base,
@@ -275,7 +292,7 @@ def test_install_sh_run_for_real_then_read_as_the_service_user(rendered_with_cer
     try:
         os.chmod(work, 0o755)  # so that nobody may reach the scratch roots
         write(files, work / "tree")
-        for host in {fleet.base.host, *(r.host for r in fleet.robots)}:
+        for host in fleet.hosts:
             shutil.copytree(tree0 / host / fleet.tls.dir.strip("/"),
                             work / "tree" / host / fleet.tls.dir.strip("/"))
             root = work / "root" / host
