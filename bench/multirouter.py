@@ -4,10 +4,12 @@ restarted (issue 21, item 5).
 Hosts are Linux network namespaces on one switch (``tests.netns.Mesh``). Host k runs
 router k; host 0 also the world and the recorder (the base station). Robot i's agent
 runs on host i mod K and is a client of its host's router first and of the others, in
-turn, after it (``deploy.render.client_config``'s fallbacks), so the neighbours of a
-robot are behind other routers and every state crosses the mesh. Every link is mutual
-TLS with the fleet's access control on every router, which also lets the other routers
-of the mesh route (``deploy.render.mesh_router_config``). At ``--kill-at`` router
+turn, after it, so the neighbours of a robot are behind other routers and every state
+crosses the mesh. The routers' and the agents' configurations are what ``btrack deploy
+render`` writes for a fleet file with ``[[routers]]`` (a robot's ``router = i mod K``),
+its certificates what ``btrack deploy certs`` makes: every link is mutual TLS with the
+fleet's access control on every router, which also lets the other routers of the mesh
+route (``deploy.render.mesh_router_config``). At ``--kill-at`` router
 ``--kill`` is killed (SIGKILL: its links drop at once), at ``--restart-at`` started again.
 
 An observer in the caller's namespace (the operator's laptop, with the recorder's
@@ -48,14 +50,9 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from deploy.certs import make_cert, make_fleet_certs  # noqa: E402
+from deploy.certs import make_fleet_certs  # noqa: E402
 from deploy.fleet import Fleet, parse  # noqa: E402
-from deploy.render import (  # noqa: E402
-    client_config,
-    mesh_router_config,
-    router_common_name,
-    router_files,
-)
+from deploy.render import client_config, render  # noqa: E402
 from tests import netns  # noqa: E402
 
 PORT = 7447
@@ -115,30 +112,32 @@ class MeshTeam:
         return rid % self.k
 
     def fleet(self) -> Fleet:
-        robots = "".join(f'[[robots]]\nid = {i}\nhost = "robot{i}"\n' for i in range(self.n))
+        """The fleet file of the run: router k on host k's address, robot i behind
+        router i mod K."""
+        robots = "".join(f'[[robots]]\nid = {i}\nhost = "robot{i}"\nrouter = {self.host_of(i)}\n'
+                         for i in range(self.n))
+        routers = "".join(f'[[routers]]\nhost = "{self.mesh.addr(k)}"\n'
+                          for k in range(1, self.k))
         return parse(f'namespace = "{self.ns}"\nlease_s = {self.args.lease}\n[base]\n'
-                     f'host = "base"\naddress = "{self.mesh.addr(0)}"\nport = {PORT}\n'
-                     f'[tls]\ndir = "{self.out / "tls"}"\n{robots}')
+                     f'host = "{self.mesh.addr(0)}"\nport = {PORT}\n'
+                     f'[tls]\ndir = "{self.out / "tls"}"\n{routers}{robots}')
 
-    def write(self, name: str, conf: dict[str, Any]) -> str:
+    def write(self, name: str, conf: dict[str, Any] | str) -> str:
         path = self.out / "conf" / f"{name}.json5"
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(conf, indent=1))
+        path.write_text(conf if isinstance(conf, str) else json.dumps(conf, indent=1))
         return str(path)
 
     def start(self) -> None:
         mesh, out = self.mesh, self.out
         mesh.up()
         fleet = self.fleet()
-        tls = out / "tls"
-        make_fleet_certs(fleet, tls, flat=True)
-        ca = (tls / "ca" / "ca.pem", tls / "ca" / "ca.key")
-        addrs = [mesh.addr(k) for k in range(self.k)]
-        for k in range(self.k):
-            pem, key = router_files(k)
-            make_cert(ca, tls / pem, tls / key, router_common_name(k),
-                      (addrs[k], "localhost", "127.0.0.1"))
-            self.router_conf[k] = self.write(f"router{k}", mesh_router_config(fleet, k, addrs))
+        make_fleet_certs(fleet, out / "tls", flat=True)
+        rendered = render(fleet)
+        cd = fleet.config_dir.strip("/")
+        for k, host in enumerate(fleet.router_hosts):
+            self.router_conf[k] = self.write(f"router{k}",
+                                             rendered[f"{host}/{cd}/zenoh-router.json5"])
         for k in range(self.k):
             self.start_router(k)
         base = mesh.addr(0)
@@ -155,9 +154,7 @@ class MeshTeam:
             agent_args += ["--cycle-s", repr(self.args.cycle_s)]
         for i in range(self.n):
             k = self.host_of(i)
-            order = [addrs[(k + j) % self.k] for j in range(self.k)]
-            conf = self.write(f"agent{i}", client_config(fleet, fleet.robot(i), host=order[0],
-                                                         fallbacks=tuple(order[1:])))
+            conf = self.write(f"agent{i}", rendered[f"robot{i}/{cd}/zenoh-agent-{i}.json5"])
             self.agents[i] = mesh.start(k, f"agent{i}", ["agent", "--id", str(i),
                                                          *agent_args, "--zenoh-config", conf,
                                                          *common])
