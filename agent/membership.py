@@ -126,6 +126,7 @@ class Membership(Generic[S]):
         self._stage = Stage.JOINING
         self._last_k = -1  # the last tick acted on or stood still on
         self._deadline: float | None = None  # until when a tick waits (see ``decide``)
+        self._timed_out = False  # the last decision acted without a neighbour's state
         self._join_deadline: float | None = None  # until when a joining agent stands still
         self._refollow()  # the candidates, before any token news
 
@@ -209,6 +210,7 @@ class Membership(Generic[S]):
         often comes before tick k's pose, keeps its deadline)."""
         if k <= self._last_k:
             raise ValueError(f"tick {k} is not after the last tick done, {self._last_k}")
+        self._timed_out = False
         if self._stage is Stage.JOINING and k > 0 and self.must_stand_still(k, now):
             return self._enter(Decision.STAND_STILL, k)
         heard = self.neighbours_heard(k) if k > 0 else self.team_heard()
@@ -217,6 +219,7 @@ class Membership(Generic[S]):
                 self._deadline = now + self.neighbour_timeout_s
             if now < self._deadline:
                 return self._enter(Decision.WAIT, k)
+            self._timed_out = True
             # waited in vain: a neighbour that never sent a state is not waited for again
             # until it does (a stray token, or a process up but not acting); one live to
             # us by its states alone is live no longer (it has no token to go with it)
@@ -269,6 +272,12 @@ class Membership(Generic[S]):
     def proven(self) -> frozenset[int]:
         """The other robots live to us by their states alone (their tokens not up)."""
         return frozenset(self._proven)
+
+    @property
+    def timed_out(self) -> bool:
+        """Whether the last decision acted without a neighbour's state, its wait for it
+        over (``neighbour_timeout_s``): what a lockstep run does then depends on timing."""
+        return self._timed_out
 
     @property
     def deadline(self) -> float | None:

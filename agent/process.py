@@ -109,6 +109,7 @@ class AgentNode:
         self.dropped = 0
         self.rejected = 0
         self.ticks = 0
+        self.timeouts = 0  # ticks acted on without a neighbour's state, its wait over
         # What a neighbour's state is judged by (agent.plausible): the edge and limits, set
         # from the first Sense; our newest tick; our own recent claims by tick; and the
         # states of ticks we have no sensing of yet (all of them before the first Sense),
@@ -427,6 +428,12 @@ class AgentNode:
             if decision is Decision.STAND_STILL:
                 self._stand_still(k)  # joining a running team: claim once we hear them
             elif decision is Decision.ACT:
+                if self.membership.timed_out:
+                    self.timeouts += 1
+                    what = f"a neighbour's state of tick {k - 1}" if k else "the whole team"
+                    self._log_some(self.timeouts, f"tick {k}: acted without {what}, after "
+                                   f"waiting {self.membership.neighbour_timeout_s:g} s "
+                                   f"(#{self.timeouts})")
                 self._tick(k)
             # WAIT: a neighbour's state may still come; we wake by membership.deadline
 
@@ -539,5 +546,6 @@ def main(argv: list[str] | None = None) -> int:
         finally:
             node.close()
             print(json.dumps({"agent": args.id, "ticks": node.ticks, "dropped": node.dropped,
-                              "rejected": node.rejected}), flush=True)
+                              "rejected": node.rejected, "timeouts": node.timeouts}),
+                  flush=True)
     return 0

@@ -178,6 +178,25 @@ def run_attacked(out: Path, sim_args: list[str], forger: str, lie_at: int,
         liar.stdout.read()
 
 
+def timing_parted(run_dir: Path) -> list[str]:
+    """What made a lockstep run's result depend on timing, from its processes' closing
+    lines: the world stepping without a live agent's command (past ``--cmd-timeout``),
+    an agent acting without a neighbour's state (past ``--neighbour-timeout``). Empty:
+    the run is the one its seed gives, bit for bit."""
+    logs = run_dir / "logs"
+    why = []
+    world = json.loads((logs / "world.out").read_text().strip().splitlines()[-1])
+    if world["timeouts"]:
+        why.append(f"the world stepped {world['timeouts']} time(s) without a command")
+    for out in sorted(logs.glob("agent*.out")):
+        lines = out.read_text().strip().splitlines()
+        last = json.loads(lines[-1]) if lines else {}
+        if last.get("timeouts"):
+            why.append(f"agent {last['agent']} acted {last['timeouts']} time(s) without "
+                       "a neighbour's state")
+    return why
+
+
 def wait_for_world(run_dir: Path, launcher: subprocess.Popen[str], timeout_s: float = 60
                    ) -> dict[str, int]:
     """The pids a launcher recorded in RUN_DIR/logs/pids.json, once its world is started;

@@ -5,6 +5,7 @@ neighbour's key (counted and dropped)."""
 from __future__ import annotations
 
 import itertools
+import json
 import math
 import queue
 import subprocess
@@ -128,6 +129,33 @@ def test_agent_survives_garbage_and_counts_it(bus, tmp_path):
         assert state.dropped == len(bad)
         assert math.isfinite(cmd.v) and math.isfinite(cmd.omega)
         assert 0.0 <= state.phase < 2 * math.pi and state.lo < state.hi
+
+
+def test_an_agent_that_acts_without_a_neighbours_state_says_so(bus, tmp_path):
+    """A tick acted on past --neighbour-timeout depends on timing: the agent logs it and
+    counts it in its closing line, so a lockstep run can tell it is not its seed's."""
+    session, log = bus[2], tmp_path / "agent.log"
+    with agent1(bus, log, (0, 2), "--neighbour-timeout", "0.3") as (proc, keys, states, cmds):
+        enc = zenoh.Encoding(MSGPACK)
+        pub0 = session.declare_publisher(keys.state(0), encoding=enc)
+        pub2 = session.declare_publisher(keys.state(2), encoding=enc)
+        when_subscribed(pub0, pub2)
+        for k in range(5):
+            if k > 0:
+                pub0.put(encode(neighbour_state(0, k - 1, 0.0, 2.0)))
+                if k != 3:  # robot 2 says nothing of tick 2
+                    pub2.put(encode(neighbour_state(2, k - 1, 4.0, 6.0)))
+            begun = time.monotonic()
+            sense_and_pose(session, keys, k, x=2.05)
+            assert cmds.get(timeout=10).k == k and states.get(timeout=10).k == k
+            if k == 3:
+                assert time.monotonic() - begun >= 0.3  # it waited its timeout first
+    assert proc.stdout is not None
+    closing = json.loads(proc.stdout.read().decode().strip().splitlines()[-1])
+    assert closing["ticks"] == 5 and closing["timeouts"] == 1, closing
+    text = log.read_text()
+    assert "tick 3: acted without a neighbour's state of tick 2, after waiting 0.3 s" in text
+    assert text.count("acted without") == 1
 
 
 def test_agent_restarted_in_a_running_team_claims_between_its_neighbours(bus, tmp_path):

@@ -126,6 +126,21 @@ def test_a_wait_keeps_its_deadline_over_ticks_and_acts_at_it():
     assert m.decide(4, 5.4) is WAIT and m.deadline == pytest.approx(5.7)  # a new wait
 
 
+def test_a_tick_acted_on_past_its_wait_says_so_and_the_next_one_does_not():
+    """``timed_out`` tells the shell a tick was acted on without a neighbour's state (a
+    lockstep run then depends on timing): only that tick, not one heard in full."""
+    m = started(1, 3, 0, 2)
+    assert not m.timed_out
+    m.heard(0, 0, seg(0.0, 2.0))
+    assert m.decide(1, 1.0) is WAIT and not m.timed_out
+    assert m.decide(1, 1.3) is ACT and m.timed_out  # robot 2's state of tick 0 never came
+    m.heard(0, 1, seg(0.0, 2.0))
+    m.heard(2, 1, seg(4.0, 6.0))
+    assert m.decide(2, 1.4) is ACT and not m.timed_out
+    late = member(1, 3, 0, timeout_s=0.5)  # tick 0 without the whole team
+    assert late.decide(0, 0.0) is WAIT and late.decide(0, 0.5) is ACT and late.timed_out
+
+
 def test_a_live_neighbour_that_never_sent_a_state_is_waited_for_once():
     """Issue 19, item 3: a stray token (or a process up but not acting) cost every tick
     a full wait. It is waited for once; once a state of it comes, as any neighbour."""
