@@ -10,7 +10,10 @@ render`` writes for a fleet file with ``[[routers]]`` (a robot's ``router = i mo
 its certificates what ``btrack deploy certs`` makes: every link is mutual TLS with the
 fleet's access control on every router, which also lets the other routers of the mesh
 route (``deploy.render.mesh_router_config``). At ``--kill-at`` router
-``--kill`` is killed (SIGKILL: its links drop at once), at ``--restart-at`` started again.
+``--kill`` is killed (SIGKILL: its links drop at once), at ``--restart-at`` started again;
+or, with ``--fault freeze``, stopped (SIGSTOP: a host that hangs without a word, its
+links open and silent, found out only by the lease) and at ``--restart-at`` let go on
+(SIGCONT).
 
 An observer in the caller's namespace (the operator's laptop, with the recorder's
 certificate) hears the world's ticks and the agents' states, stamped with its wall
@@ -34,6 +37,8 @@ Needs root (``ip netns``); says why and exits 2 where namespaces cannot be made.
     sudo .venv/bin/python bench/multirouter.py --robots 100 --routers 3 --out runs/mesh100
     .venv/bin/python bench/multirouter.py --robots 6 --routers 3 --realtime --duration 60 \\
         --kill-at 25 --restart-at 40 --out /tmp/mesh6    # what tests/test_multirouter.py runs
+    .venv/bin/python bench/multirouter.py --robots 6 --routers 3 --realtime --duration 60 \
+        --kill-at 25 --restart-at 40 --fault freeze --out /tmp/mesh6f   # ... and this too
 """
 
 from __future__ import annotations
@@ -69,6 +74,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--kill-at", type=float, default=120.0, help="simulated s (120)")
     p.add_argument("--restart-at", type=float, default=180.0, help="simulated s (180)")
     p.add_argument("--kill", type=int, default=None, help="which router (the last)")
+    p.add_argument("--fault", choices=("kill", "freeze"), default="kill",
+                   help="kill: SIGKILL at --kill-at, started again at --restart-at; freeze: "
+                   "SIGSTOP, then SIGCONT (default kill)")
     p.add_argument("--realtime", action="store_true",
                    help="the world paces ticks on the wall clock (default: lockstep)")
     p.add_argument("--lease", type=float, default=1.0, help="the robots' lease, s (1)")
@@ -193,6 +201,7 @@ class MeshTeam:
         """Start, kill and restart the router on time, wait for the world; its code."""
         began = time.monotonic()
         last_print = began
+        freeze = self.args.fault == "freeze"
         while self.world.poll() is None:
             if time.monotonic() - began > self.args.wall_limit:
                 print("multirouter: the wall limit came first", file=sys.stderr)
@@ -200,17 +209,22 @@ class MeshTeam:
             t = self.observed().last_t()
             if self.kill_wall is None and t >= self.args.kill_at:
                 self.links["before_kill"] = self.connections()
-                self.routers[self.kill].send_signal(signal.SIGKILL)
+                self.routers[self.kill].send_signal(signal.SIGSTOP if freeze
+                                                    else signal.SIGKILL)
                 self.kill_wall, self.kill_t = time.monotonic(), t
-                print(f"multirouter: t = {t:.1f} s: router {self.kill} killed", flush=True)
+                print(f"multirouter: t = {t:.1f} s: router {self.kill} "
+                      f"{'frozen' if freeze else 'killed'}", flush=True)
             elif (self.kill_wall is not None and self.restart_wall is None
                   and t >= self.args.restart_at):
-                self.routers[self.kill].wait(5)
                 self.links["before_restart"] = self.connections()
-                self.start_router(self.kill)
+                if freeze:
+                    self.routers[self.kill].send_signal(signal.SIGCONT)
+                else:
+                    self.routers[self.kill].wait(5)
+                    self.start_router(self.kill)
                 self.restart_wall = time.monotonic()
-                print(f"multirouter: t = {t:.1f} s: router {self.kill} started again",
-                      flush=True)
+                print(f"multirouter: t = {t:.1f} s: router {self.kill} "
+                      f"{'let go on' if freeze else 'started again'}", flush=True)
             if "at_end" not in self.links and t >= self.args.duration - 3.0:
                 self.links["at_end"] = self.connections()
             if time.monotonic() - last_print > 30:
@@ -276,7 +290,8 @@ def measures(team: MeshTeam) -> dict[str, Any]:
 
     seen, n = team.observed(), team.n
     out: dict[str, Any] = {"robots": n, "routers": team.k, "killed_router": team.kill,
-                           "map": team.map, "realtime": team.args.realtime,
+                           "fault": team.args.fault, "map": team.map,
+                           "realtime": team.args.realtime,
                            "ticks_seen": len(seen.ticks), "states_seen": len(seen.states)}
     s = error_series(load_run(team.out / "run.mcap"))
     phase = np.abs(s.phase)

@@ -205,6 +205,19 @@ def mesh_rules(ns: str, routers: int) -> tuple[list[dict[str, Any]], dict[str, A
     return rules, subject
 
 
+# How long a link's opening (TCP, TLS and Zenoh's handshake) may take, in leases. Zenoh's
+# default is 10 s: a client whose router hung (its host up, the process silent) found
+# the lease over after 1 s, then waited 10 s on the hung router's half-open handshake
+# before it tried the next router of its list (bench/multirouter.py --fault freeze).
+OPEN_TIMEOUT_LEASES = 2.0
+
+
+def open_timeout_ms(lease_s: float) -> int:
+    """Zenoh's ``transport/unicast/open_timeout`` for a link of lease ``lease_s``: two
+    leases, and never under a second (a TLS handshake over a slow radio link)."""
+    return max(1000, round(OPEN_TIMEOUT_LEASES * lease_s * 1000))
+
+
 def mesh_router_config(fleet: Fleet, index: int, addresses: list[str],
                        listen_host: str = "0.0.0.0") -> dict[str, Any]:
     """Router ``index`` of a mesh of routers at ``addresses`` (one per site, all on the
@@ -219,6 +232,7 @@ def mesh_router_config(fleet: Fleet, index: int, addresses: list[str],
     proto = "tls" if fleet.tls.enabled else "tcp"
     conf["connect"] = {"endpoints": [f"{proto}/{a}:{fleet.base.port}"
                                      for i, a in enumerate(addresses) if i != index]}
+    conf["transport"]["unicast"] = {"open_timeout": open_timeout_ms(fleet.base.lease_s)}
     if fleet.tls.enabled:
         p = _tls_paths(fleet, *router_files(index))
         conf["transport"]["link"]["tls"].update({
@@ -281,6 +295,8 @@ def client_config(fleet: Fleet, who: Robot | str, host: str | None = None,
         "transport": {"link": {"tx": {"lease": int(lease * 1000)}},
                       "shared_memory": {"enabled": False}},  # as wire.session's default
     }
+    if len(conf["connect"]["endpoints"]) > 1:  # a router that hangs: on to the next soon
+        conf["transport"]["unicast"] = {"open_timeout": open_timeout_ms(lease)}
     if fleet.tls.enabled:
         cert, key = ((robot.cert, robot.key) if robot is not None
                      else fleet.tls.role_files(str(who)))

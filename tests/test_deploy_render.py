@@ -330,6 +330,7 @@ def test_a_fleet_over_sites_gives_every_router_host_a_meshed_router(sites: Path)
         for other in others:  # connects to every other router, by name
             assert f"tls/{other}:7447" in text, (host, other)
         assert f"tls/{host}:7447" not in text  # and not to itself
+        assert json.loads(conf.get_json("transport/unicast/open_timeout")) < 10_000
         assert '"default_permission":"deny"' in text
         assert "btrack-router-0" in text and "btrack-router-2" in text
         # the other sites run only the router there; the base station its own services too
@@ -345,11 +346,21 @@ def test_a_robot_connects_to_its_sites_router_first_then_round_the_mesh(sites: P
              3: SITE_ROUTERS[2:] + SITE_ROUTERS[:2]}
     for rid, hosts in order.items():
         path = sites / f"robot{rid}.coast/etc/btrack/zenoh-agent-{rid}.json5"
-        connect = json.loads(zenoh.Config.from_file(str(path)).get_json("connect"))
+        conf = zenoh.Config.from_file(str(path))
+        connect = json.loads(conf.get_json("connect"))
         assert connect["endpoints"] == [f"tls/{h}:7447" for h in hosts], rid
-    # the single-router example is unchanged: one router, no mesh certificates
+        # a hung router (host up, process silent) is left for the next within two
+        # leases, not Zenoh's default 10 s of handshake
+        lease_ms = json.loads(conf.get_json("transport/link/tx/lease"))
+        timeout = json.loads(conf.get_json("transport/unicast/open_timeout"))
+        assert timeout == max(1000, 2 * lease_ms) < 10_000, rid
+    # the single-router example is unchanged: one router, no mesh certificates, and
+    # Zenoh's own open timeout (there is no other router to go to)
     fleet = parse(EXAMPLE.read_text())
     assert not fleet.meshed and fleet.routers_of(fleet.robot(2)) == ("base.lab",)
+    from deploy.render import client_config
+    single = client_config(fleet, fleet.robot(2))
+    assert "unicast" not in single["transport"]
 
 
 def test_certs_for_a_fleet_over_sites_name_each_router(tmp_path: Path) -> None:
