@@ -106,7 +106,8 @@ class Membership(Generic[S]):
     running team has an id past the size the others were started with)."""
 
     def __init__(self, robot: int, team: int, neighbour_timeout_s: float = 1.0,
-                 join_wait_s: float = JOIN_WAIT_S, ring: bool = False):
+                 join_wait_s: float = JOIN_WAIT_S, ring: bool = False,
+                 token_grace_s: float = 0.0):
         if not 0 <= robot < team:
             raise ValueError(f"robot id {robot} outside a team of {team}")
         self.robot = robot
@@ -114,6 +115,12 @@ class Membership(Generic[S]):
         self.ring = ring
         self.neighbour_timeout_s = neighbour_timeout_s
         self.join_wait_s = join_wait_s
+        if not token_grace_s >= 0.0:
+            raise ValueError(f"token grace {token_grace_s} s is not 0 or more")
+        self.token_grace_s = token_grace_s
+        # Neighbours whose token went while we held them (``token_grace_s``): live to us
+        # by their states (in ``_proven``) until a tick waits that long for one in vain.
+        self._held: set[int] = set()
         self._live: set[int] = set()
         # Live to us by their states alone, their tokens not up (see the module's doc);
         # and, of a robot seen to go or waited for in vain, the last tick whose state
@@ -126,6 +133,8 @@ class Membership(Generic[S]):
         self._stage = Stage.JOINING
         self._last_k = -1  # the last tick acted on or stood still on
         self._deadline: float | None = None  # until when a tick waits (see ``decide``)
+        self._wait_began: float | None = None  # when it began to wait
+        self._waited_s = 0.0  # how long the last tick acted on without a state waited
         self._timed_out = False  # the last decision acted without a neighbour's state
         self._join_deadline: float | None = None  # until when a joining agent stands still
         self._refollow()  # the candidates, before any token news
@@ -139,9 +148,27 @@ class Membership(Generic[S]):
         is no longer a neighbour is forgotten."""
         if robot == self.robot:
             return
+        was_held = robot in self._held
+        self._held.discard(robot)
         if up:
             self._live.add(robot)
             self._silent.pop(robot, None)
+            if was_held:  # back through another router: a state of the gap may be lost
+                self._followed_at[robot] = self._last_k
+        elif (self.token_grace_s > 0 and robot in self.neighbours()
+              and self._states.get(robot)):
+            # held: a neighbour we hear from stays one, its history kept, while its
+            # states come (a router that died took its clients' tokens with it, and they
+            # come back through another); dropped once a tick has waited
+            # ``token_grace_s`` for one in vain (``decide``). As for a new neighbour,
+            # the next tick does not wait for it: its state of our last tick may have
+            # gone out on the link that broke (and every robot waiting for a lost state
+            # stalled the lockstep for the whole neighbour timeout).
+            self._live.discard(robot)
+            self._proven.add(robot)
+            self._held.add(robot)
+            self._followed_at[robot] = self._last_k
+            return
         else:
             self._live.discard(robot)
             self._silent[robot] = self._last_k + GONE_TICKS
@@ -215,11 +242,18 @@ class Membership(Generic[S]):
             return self._enter(Decision.STAND_STILL, k)
         heard = self.neighbours_heard(k) if k > 0 else self.team_heard()
         if not heard:
-            if self._deadline is None:
-                self._deadline = now + self.neighbour_timeout_s
+            if self._wait_began is None:
+                self._wait_began = now
+            # waiting for held neighbours alone, their grace (they may have been held
+            # since the wait began: a token's news can come after the tick)
+            held = k > 0 and self._missing(self._need(k)) <= self._held
+            self._deadline = self._wait_began + (
+                min(self.token_grace_s, self.neighbour_timeout_s) if held
+                else self.neighbour_timeout_s)
             if now < self._deadline:
                 return self._enter(Decision.WAIT, k)
             self._timed_out = True
+            self._waited_s = now - self._wait_began
             # waited in vain: a neighbour that never sent a state is not waited for again
             # until it does (a stray token, or a process up but not acting); one live to
             # us by its states alone is live no longer (it has no token to go with it)
@@ -234,6 +268,7 @@ class Membership(Generic[S]):
                   and max(self._states[rid], default=-1) < need}
         for rid in silent:
             self._proven.discard(rid)
+            self._held.discard(rid)
             self._silent[rid] = need
         if silent:
             self._refollow()
@@ -243,7 +278,7 @@ class Membership(Generic[S]):
         if decision is not Decision.WAIT:
             self._last_k = k
         if decision is Decision.ACT:
-            self._deadline = None
+            self._deadline = self._wait_began = None
         return decision
 
     # -- what it answers --------------------------------------------------------------
@@ -269,6 +304,11 @@ class Membership(Generic[S]):
         return frozenset(self._live)
 
     @property
+    def held(self) -> frozenset[int]:
+        """Neighbours whose token went, held while their states come (``token_grace_s``)."""
+        return frozenset(self._held)
+
+    @property
     def proven(self) -> frozenset[int]:
         """The other robots live to us by their states alone (their tokens not up)."""
         return frozenset(self._proven)
@@ -278,6 +318,11 @@ class Membership(Generic[S]):
         """Whether the last decision acted without a neighbour's state, its wait for it
         over (``neighbour_timeout_s``): what a lockstep run does then depends on timing."""
         return self._timed_out
+
+    @property
+    def waited_s(self) -> float:
+        """How long (wall s) the last tick acted on without a neighbour's state waited."""
+        return self._waited_s
 
     @property
     def deadline(self) -> float | None:
@@ -384,13 +429,13 @@ class Membership(Generic[S]):
         listened: it is not waited for, and this tick acts on what we have (the lockstep
         must not stall at every membership change). An agent joining a running team
         waits for its neighbours' states of k-1 or later: it claims a share of them."""
-        need = self._need(k)
-        for rid in self.neighbours():
-            if rid is None or self._followed_at[rid] >= need or rid in self._mute:
-                continue
-            if max(self._states[rid], default=-1) < need:
-                return False
-        return True
+        return not self._missing(self._need(k))
+
+    def _missing(self, need: int) -> set[int]:
+        """The neighbours waited for whose states of tick ``need`` or later are not here."""
+        return {rid for rid in self.neighbours() if rid is not None
+                and self._followed_at[rid] < need and rid not in self._mute
+                and max(self._states[rid], default=-1) < need}
 
     def _need(self, k: int) -> int:
         """The tick of the neighbours' states that tick ``k`` waits for."""

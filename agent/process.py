@@ -20,6 +20,7 @@ import argparse
 import collections
 import dataclasses
 import json
+import math
 import os
 import queue
 import signal
@@ -74,6 +75,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="deepest patrol expected, m, for the K_s stability check")
     p.add_argument("--neighbour-timeout", type=float, default=1.0,
                    help="wall seconds to wait for a live neighbour's previous state")
+    p.add_argument("--token-grace", type=float, default=0.0, metavar="S",
+                   help="keep a neighbour whose liveliness token goes while its states "
+                   "come, until a tick has waited S wall s for one (a fleet behind "
+                   "meshed routers, whose robots change router; default 0: drop it)")
     add_session_args(p)
     return p
 
@@ -87,14 +92,15 @@ class AgentNode:
 
     def __init__(self, session: zenoh.Session, keys: Keys, robot: int, team: int,
                  gains: Any, patrol: Any, limits: Any, neighbour_timeout: float,
-                 max_depth_m: float = 2.0):
+                 max_depth_m: float = 2.0, token_grace_s: float = 0.0):
         self.session = session
         self.keys = keys
         self.robot = robot
         self.team = team
         self.max_depth_m = max_depth_m
         self.gains, self.patrol_cfg, self.limits = gains, patrol, limits
-        self.membership: Membership[AgentState] = Membership(robot, team, neighbour_timeout)
+        self.membership: Membership[AgentState] = Membership(
+            robot, team, neighbour_timeout, token_grace_s=token_grace_s)
         # Every message in arrival order; a token in ``wake`` for each wake-up wanted.
         self.inbox: collections.deque[tuple[str, Any]] = collections.deque()
         self.wake: queue.SimpleQueue[None] = queue.SimpleQueue()
@@ -432,7 +438,7 @@ class AgentNode:
                     self.timeouts += 1
                     what = f"a neighbour's state of tick {k - 1}" if k else "the whole team"
                     self._log_some(self.timeouts, f"tick {k}: acted without {what}, after "
-                                   f"waiting {self.membership.neighbour_timeout_s:g} s "
+                                   f"waiting {self.membership.waited_s:.2f} s "
                                    f"(#{self.timeouts})")
                 self._tick(k)
             # WAIT: a neighbour's state may still come; we wake by membership.deadline
@@ -528,13 +534,17 @@ def main(argv: list[str] | None = None) -> int:
     if problems:
         print("btrack agent: unstable gains: " + "; ".join(problems), file=sys.stderr)
         return 2
+    if not 0.0 <= args.token_grace < math.inf:
+        print(f"btrack agent: --token-grace {args.token_grace:g}: expected 0 or more "
+              "wall seconds", file=sys.stderr)
+        return 2
     opts = options_from_args(args)
     if opts.lease_s is None and not (opts.config_file or os.environ.get("ZENOH_CONFIG")):
         # a robot's neighbours must notice within a second that it froze
         opts = dataclasses.replace(opts, lease_s=DEFAULT_LEASE_S)
     with open_session(opts) as session:
         node = AgentNode(session, Keys(opts.ns), args.id, args.robots, gains, patrol, limits,
-                         args.neighbour_timeout, args.max_depth)
+                         args.neighbour_timeout, args.max_depth, args.token_grace)
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, lambda *_: node.stop())
         try:

@@ -30,7 +30,11 @@ clock. It writes ``OUT/measured.json``:
 - ``unowned_max_s``: after the kill, the longest wall time during which the latest
   segments of the robots the world lists leave a stretch of the edge over 5 cm
   without an owner;
-- ``tiled_at_end``: the last states tile the edge, in order, every robot live.
+- ``tiled_at_end``: the last states tile the edge, in order, every robot live;
+- ``phase_minute_after_kill_worst_rad``: the worst pair's position phase error in the
+  60 simulated s from the fault, ``pairs_over_band_minute_after_kill`` how many pairs
+  passed 0.05 rad then; ``states_skipping_a_neighbour``: states heard after the fault
+  naming a neighbour other than the next id (a robot taken for gone).
 
 Needs root (``ip netns``); says why and exits 2 where namespaces cannot be made.
 
@@ -57,7 +61,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from deploy.certs import make_fleet_certs  # noqa: E402
 from deploy.fleet import Fleet, parse  # noqa: E402
-from deploy.render import client_config, render  # noqa: E402
+from deploy.render import MESH_TOKEN_GRACE_S, client_config, render  # noqa: E402
 from tests import netns  # noqa: E402
 
 PORT = 7447
@@ -83,6 +87,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--cycle-s", type=float, default=None,
                    help="fix the team's cycle (default: from the team's need)")
     p.add_argument("--start", default="in-phase", help="the world's --start (in-phase)")
+    p.add_argument("--token-grace", type=float, default=MESH_TOKEN_GRACE_S, metavar="S",
+                   help="the agents' --token-grace, as btrack deploy render gives a "
+                   f"meshed fleet ({MESH_TOKEN_GRACE_S:g}; 0: a neighbour whose token goes "
+                   "is dropped at once)")
     p.add_argument("--startup-timeout", type=float, default=300.0,
                    help="wall s the world waits for every agent (300)")
     p.add_argument("--wall-limit", type=float, default=3600.0,
@@ -160,6 +168,8 @@ class MeshTeam:
             agent_args += ["--neighbour-timeout", "0"]
         if self.args.cycle_s:
             agent_args += ["--cycle-s", repr(self.args.cycle_s)]
+        if self.args.token_grace:
+            agent_args += ["--token-grace", repr(self.args.token_grace)]
         for i in range(self.n):
             k = self.host_of(i)
             conf = self.write(f"agent{i}", rendered[f"robot{i}/{cd}/zenoh-agent-{i}.json5"])
@@ -282,6 +292,9 @@ def unowned_max(ticks: list, states: list, since: float, edge: tuple[float, floa
     return worst
 
 
+PHASE_BAND_RAD = 0.05  # the issue's position phase goal
+
+
 def measures(team: MeshTeam) -> dict[str, Any]:
     import numpy as np
 
@@ -291,6 +304,7 @@ def measures(team: MeshTeam) -> dict[str, Any]:
     seen, n = team.observed(), team.n
     out: dict[str, Any] = {"robots": n, "routers": team.k, "killed_router": team.kill,
                            "fault": team.args.fault, "map": team.map,
+                           "token_grace_s": team.args.token_grace,
                            "realtime": team.args.realtime,
                            "ticks_seen": len(seen.ticks), "states_seen": len(seen.states)}
     s = error_series(load_run(team.out / "run.mcap"))
@@ -299,6 +313,12 @@ def measures(team: MeshTeam) -> dict[str, Any]:
     if team.kill_t is not None:
         before = (s.t >= team.kill_t - 10.0) & (s.t < team.kill_t)
         out["phase_before_kill_rad"] = float(np.nanmean(phase[:, before]))
+        # what the fault did to a converged team: the minute after it, pair by pair
+        minute = (s.t >= team.kill_t) & (s.t < team.kill_t + 60.0)
+        if minute.any():
+            worst = np.nanmax(phase[:, minute], axis=1)
+            out["phase_minute_after_kill_worst_rad"] = float(np.nanmax(worst))
+            out["pairs_over_band_minute_after_kill"] = int(np.sum(worst > PHASE_BAND_RAD))
     out["phase_last_quarter_rad"] = float(np.nanmean(phase[:, s.t >= 0.75 * end]))
     out["simulated_s"] = end
     killed = {i for i in range(n) if team.host_of(i) == team.kill}
@@ -340,6 +360,10 @@ def measures(team: MeshTeam) -> dict[str, Any]:
         last[i][5] == (i - 1 if i > 0 else -1) and last[i][6] == (i + 1 if i + 1 < n else -1)
         and (i + 1 == n or abs(last[i][4] - last[i + 1][3]) < GAP_M) for i in range(n))
     out["tiled_at_end"] = bool(tiled)
+    if team.kill_wall is not None:  # states naming a neighbour past a live robot
+        out["states_skipping_a_neighbour"] = sum(
+            1 for row in seen.states if row[0] >= team.kill_wall
+            and (row[5] not in (row[2] - 1, -1) or row[6] not in (row[2] + 1, -1)))
     return out
 
 

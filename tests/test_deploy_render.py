@@ -354,6 +354,10 @@ def test_a_robot_connects_to_its_sites_router_first_then_round_the_mesh(sites: P
         lease_ms = json.loads(conf.get_json("transport/link/tx/lease"))
         timeout = json.loads(conf.get_json("transport/unicast/open_timeout"))
         assert timeout == max(1000, 2 * lease_ms) < 10_000, rid
+        # its agent holds a neighbour whose token goes while its states come (a router
+        # that died took its clients' tokens with it): see deploy.render.agent_args
+        env = (sites / f"robot{rid}.coast/etc/btrack/agent-{rid}.env").read_text()
+        assert "--token-grace 0.5" in env, env
     # the single-router example is unchanged: one router, no mesh certificates, and
     # Zenoh's own open timeout (there is no other router to go to)
     fleet = parse(EXAMPLE.read_text())
@@ -361,6 +365,8 @@ def test_a_robot_connects_to_its_sites_router_first_then_round_the_mesh(sites: P
     from deploy.render import client_config
     single = client_config(fleet, fleet.robot(2))
     assert "unicast" not in single["transport"]
+    from deploy.render import agent_args
+    assert "--token-grace" not in agent_args(fleet, fleet.robot(2))
 
 
 def test_certs_for_a_fleet_over_sites_name_each_router(tmp_path: Path) -> None:

@@ -233,6 +233,100 @@ def test_a_frozen_neighbour_leaves_and_comes_back_with_an_empty_history():
     assert m.stage is Stage.MEMBER  # a member keeps its segment: it never stands still
 
 
+def held_member(grace_s: float = 0.2) -> Membership[SegmentView]:
+    """Robot 1 of 4 with ``token_grace_s``, having acted on ticks 0 and 1 with its
+    neighbours 0 and 2 heard."""
+    m: Membership[SegmentView] = Membership(1, 4, neighbour_timeout_s=1.0,
+                                            token_grace_s=grace_s)
+    for rid in (0, 2, 3):
+        m.alive(rid, True)
+    assert m.decide(0, 0.0) is ACT
+    m.heard(0, 0, seg(0.0, 1.5))
+    m.heard(2, 0, seg(3.0, 4.5))
+    assert m.decide(1, 0.1) is ACT
+    return m
+
+
+def test_a_neighbour_whose_token_goes_while_its_states_come_is_held_with_its_history():
+    """A router that dies takes its clients' tokens with it; they come back through
+    another router, their states sooner than their tokens (bench/multirouter.py)."""
+    m = held_member()
+    m.alive(2, False)
+    assert m.neighbours() == (0, 2) and m.held == {2} and 2 in m.proven
+    assert m.latest(2, 99) == seg(3.0, 4.5)  # its history kept
+    m.heard(0, 1, seg(0.0, 1.5))
+    assert m.heard(2, 1, seg(3.0, 4.5))  # its states still count
+    assert m.decide(2, 0.2) is ACT and not m.timed_out
+    m.alive(2, True)  # its token again, through another router
+    assert m.held == frozenset() and 2 in m.live and m.neighbours() == (0, 2)
+    assert m.latest(2, 99) == seg(3.0, 4.5)
+
+
+def test_a_held_neighbour_whose_states_stop_is_dropped_after_the_grace_not_the_timeout():
+    m = held_member(grace_s=0.2)
+    m.alive(2, False)  # killed: its token went, and no state comes
+    m.heard(0, 1, seg(0.0, 1.5))
+    # the tick after its token went does not wait for it (its state may have been lost
+    # with the link that broke), and acts on its history
+    assert m.decide(2, 1.0) is ACT and not m.timed_out and m.neighbours() == (0, 2)
+    m.heard(0, 2, seg(0.0, 1.5))
+    assert m.decide(3, 1.1) is WAIT and m.deadline == pytest.approx(1.3)  # the grace
+    assert m.decide(3, 1.29) is WAIT
+    assert m.decide(3, 1.3) is ACT and m.timed_out and m.waited_s == pytest.approx(0.2)
+    assert m.neighbours() == (0, 3) and m.held == frozenset()
+    assert not m.heard(2, 2, seg(3.0, 4.5))  # a late one of the tick waited for: refused
+    m.heard(0, 3, seg(0.0, 1.5))
+    assert m.decide(4, 1.4) is WAIT  # robot 3, our neighbour now, is waited for
+    m.heard(3, 3, seg(4.5, 6.0))
+    assert m.decide(4, 1.41) is ACT
+    # a state of a later tick (it was slow, not dead) takes it back, as a candidate's
+    assert m.heard(2, 4, seg(3.0, 4.5)) and m.neighbours() == (0, 2)
+
+
+def test_a_token_that_goes_or_comes_back_while_a_tick_waits_ends_the_wait():
+    """A state lost with the link that broke is never coming: every robot waiting for
+    one stalled the lockstep for the whole neighbour timeout (30 robots, 3 routers)."""
+    m = held_member(grace_s=0.2)
+    m.heard(0, 1, seg(0.0, 1.5))
+    assert m.decide(2, 1.0) is WAIT and m.deadline == pytest.approx(2.0)  # robot 2 live
+    m.alive(2, False)  # its router died: its token went while we waited for it
+    assert m.decide(2, 1.1) is ACT and not m.timed_out
+    m.heard(0, 2, seg(0.0, 1.5))
+    m.heard(2, 2, seg(3.0, 4.5))  # its states come through another router
+    assert m.decide(3, 1.2) is ACT
+    m.heard(0, 3, seg(0.0, 1.5))
+    assert m.decide(4, 1.3) is WAIT  # its state of 3 is lost in the gap
+    m.alive(2, True)  # and its token comes back
+    assert m.decide(4, 1.31) is ACT and not m.timed_out
+    assert m.neighbours() == (0, 2) and m.latest(2, 99) == seg(3.0, 4.5)
+
+
+def test_with_a_held_and_a_live_neighbour_missing_a_tick_waits_the_whole_timeout():
+    m = held_member(grace_s=0.2)
+    m.alive(2, False)
+    assert m.decide(2, 1.0) is WAIT and m.deadline == pytest.approx(2.0)  # robot 0 too
+
+
+def test_without_a_grace_or_a_state_heard_a_neighbour_whose_token_goes_is_dropped():
+    m = held_member(grace_s=0.0)
+    m.alive(2, False)
+    assert m.neighbours() == (0, 3) and m.held == frozenset()
+    m = held_member(grace_s=0.2)
+    m.alive(3, False)  # not a neighbour: nothing to hold
+    assert m.held == frozenset() and 3 not in m.proven
+    m.alive(3, True)
+    m.alive(2, False)
+    m.alive(2, True)
+    # a neighbour never heard from (its token came, no state yet) is not held
+    fresh: Membership[SegmentView] = Membership(1, 3, token_grace_s=0.2)
+    fresh.alive(0, True)
+    fresh.alive(2, True)
+    fresh.alive(2, False)
+    assert fresh.neighbours() == (0, None) and fresh.held == frozenset()
+    with pytest.raises(ValueError, match="token grace"):
+        Membership(1, 3, token_grace_s=-1.0)
+
+
 # -- joining a running team: the two races -------------------------------------------------
 
 def test_restarted_hearing_nobody_yet_stands_still_up_to_the_join_wait_then_takes_the_edge():
@@ -343,15 +437,18 @@ def runs(draw):
     team = draw(st.integers(1, MAX_TEAM))
     robot = draw(st.integers(0, team - 1))
     joining = draw(st.booleans())  # a (re)start mid-run, or the team's start
-    return team, robot, joining, draw(EVENTS)
+    grace_s = draw(st.sampled_from([0.0, 0.1, 0.5]))  # a held neighbour's grace
+    return team, robot, joining, grace_s, draw(EVENTS)
 
 
 @settings(max_examples=100, deadline=None)
 @given(runs())
 def test_membership_invariants_over_random_event_sequences(run):
-    team, robot, joining, sequence = run
+    team, robot, joining, grace_s, sequence = run
     timeout_s = 0.3
-    m: Membership[SegmentView] = Membership(robot, team, neighbour_timeout_s=timeout_s)
+    m: Membership[SegmentView] = Membership(robot, team, neighbour_timeout_s=timeout_s,
+                                            token_grace_s=grace_s)
+    shortest_wait = min(grace_s, timeout_s) if grace_s > 0 else timeout_s
     live: set[int] = set()
     spoke: set[int] = set()  # ids a state of which came
     now = 0.0
@@ -393,7 +490,8 @@ def test_membership_invariants_over_random_event_sequences(run):
             if decision is ACT:
                 assert m.deadline is None
                 if not heard:  # acted without a neighbour's state: only once waited out
-                    assert wait_began is not None and now - wait_began >= timeout_s - 1e-9
+                    assert (wait_began is not None
+                            and now - wait_began >= shortest_wait - 1e-9)
                 wait_began = None
                 if stage_before is Stage.JOINING and k > 0 and nobody:
                     # alone: only once it has stood still for the join wait
@@ -414,6 +512,8 @@ def test_membership_invariants_over_random_event_sequences(run):
         # or by a state of it
         assert m.live == live
         assert m.proven <= spoke - live - {robot}
+        assert m.held <= m.proven  # a held neighbour is live to us by its states
+        assert not m.held or grace_s > 0
         known = live | m.proven
         assert m.neighbours() == (max((r for r in known if r < robot), default=None),
                                   min((r for r in known if r > robot), default=None))
