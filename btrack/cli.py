@@ -9,6 +9,8 @@ from __future__ import annotations
 import importlib
 import sys
 
+from wire.errors import BusError
+
 COMMANDS: dict[str, tuple[str, str]] = {
     "sim": ("deploy.launcher", "run a simulated team: world, recorder and N agents"),
     "agent": ("agent.process", "one robot's controller (meant for the robot's own computer)"),
@@ -43,7 +45,12 @@ def dispatch(prog: str, commands: dict[str, tuple[str, str]], argv: list[str]) -
     if name not in commands:
         print(f"{prog}: unknown command {name!r}\n\n{usage}", file=sys.stderr)
         return 2
-    return int(importlib.import_module(commands[name][0]).main(rest) or 0)
+    module = importlib.import_module(commands[name][0])
+    try:
+        return int(module.main(rest) or 0)
+    except BusError as exc:
+        print(f"{prog} {name}: {exc}", file=sys.stderr)
+        return 1
 
 
 def main(argv: list[str] | None = None) -> int:

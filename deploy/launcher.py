@@ -33,6 +33,7 @@ from deploy.procs import (
     ODOM_FLAGS,
     Child,
     ProcessGroup,
+    bindable,
     forward_flags,
     free_port,
     non_negative,
@@ -465,6 +466,10 @@ def run(args: argparse.Namespace) -> int:
         if late:
             why = (f"--fault {late[0].kind}:{late[0].agent}@{late[0].at_s:g} would come after "
                    f"the run's end (--duration {args.duration:g} s)")
+    if why is None and args.port is not None and args.engine == "bus" and not bindable(
+            args.port):
+        why = (f"--port {args.port}: something already listens on loopback port "
+               f"{args.port}; choose another, or leave --port out and one is drawn")
     out: Path = args.out or Path("runs") / time.strftime(
         "hil-%Y%m%d-%H%M%S" if args.hil else "%Y%m%d-%H%M%S")
     why = why or _make_out(out)

@@ -8,6 +8,7 @@ import argparse
 import contextlib
 import json
 import os
+import random
 import signal
 import socket
 import subprocess
@@ -80,8 +81,43 @@ def forward_flags(args: argparse.Namespace, names: tuple[str, ...]) -> list[str]
     return out
 
 
-def free_port() -> int:
-    """A TCP port on loopback that was free a moment ago."""
+# Where a listening port is drawn: under the kernel's ephemeral range, which every
+# outgoing connection on the machine takes its local port from. A port the kernel
+# handed out as free can be taken by one of them before the process that was to
+# listen on it does (the test suite's Zenoh sessions open hundreds), and that process
+# then cannot listen; a port under the range is taken only by another listener.
+LISTEN_PORTS_FROM = 10000
+EPHEMERAL_RANGE = Path("/proc/sys/net/ipv4/ip_local_port_range")
+
+
+def ephemeral_low(path: Path = EPHEMERAL_RANGE) -> int | None:
+    """The first port of the kernel's ephemeral range, None where it cannot be read."""
+    try:
+        return int(path.read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def bindable(port: int) -> bool:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError:
+            return False
+    return True
+
+
+def free_port(draws: int = 64) -> int:
+    """A TCP port on loopback that was free a moment ago: drawn at random under the
+    ephemeral range where there is room, else (or if no draw was free) one the kernel
+    picks."""
+    low = ephemeral_low()
+    if low is not None and low - LISTEN_PORTS_FROM >= 1000:
+        rng = random.SystemRandom()
+        for _ in range(draws):
+            port = rng.randrange(LISTEN_PORTS_FROM, low)
+            if bindable(port):
+                return port
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])

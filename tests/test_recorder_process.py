@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -31,7 +32,7 @@ def recorder_on_bus(out: Path) -> Iterator[tuple[subprocess.Popen[bytes], Keys, 
     proc = start_recorder(out, ns, port)
     try:
         with bus_session(ns, port) as session:
-            wait_recorder_alive(session, keys)
+            wait_recorder_alive(session, keys, proc)
             yield proc, keys, session
     finally:
         end(proc)
@@ -65,7 +66,11 @@ def bus_session(ns: str, port: int) -> zenoh.Session:
     )
 
 
-def wait_recorder_alive(session: zenoh.Session, keys: Keys, timeout: float = 30.0) -> None:
+def wait_recorder_alive(session: zenoh.Session, keys: Keys,
+                        proc: subprocess.Popen[bytes] | None = None,
+                        timeout: float = 30.0) -> None:
+    """Until the recorder's liveliness token is seen; a recorder that died meanwhile
+    fails the wait at once, with what it said."""
     seen = threading.Event()
     sub = session.liveliness().declare_subscriber(
         keys.alive_recorder(),
@@ -73,7 +78,12 @@ def wait_recorder_alive(session: zenoh.Session, keys: Keys, timeout: float = 30.
         history=True,
     )
     try:
-        assert seen.wait(timeout), "the recorder's liveliness token never appeared"
+        deadline = time.monotonic() + timeout
+        while not seen.wait(0.2):
+            if proc is not None and proc.poll() is not None:
+                said = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
+                raise AssertionError(f"the recorder exited ({proc.returncode}): {said}")
+            assert time.monotonic() < deadline, "the recorder's liveliness token never appeared"
     finally:
         sub.undeclare()
 
@@ -306,7 +316,7 @@ def test_the_launcher_says_what_a_recording_lacks(tmp_path: Path) -> None:
                                             "--no-multicast", "--listen",
                                             f"tcp/127.0.0.1:{port}"])
         with bus_session(ns, port) as session:
-            wait_recorder_alive(session, keys)
+            wait_recorder_alive(session, keys, recorder.proc)
             for k in range(5):
                 session.put(keys.world_tick(), encode(Tick(k * 0.1, k, [])))
             ask_progress(session, keys, lambda p: p.k == 4)
@@ -316,3 +326,24 @@ def test_the_launcher_says_what_a_recording_lacks(tmp_path: Path) -> None:
                 f"it holds 5 of the run's {total} ticks, not the final one")
     finally:
         group.stop_all()
+
+
+def test_a_recorder_whose_endpoint_is_taken_says_so_in_one_line(tmp_path: Path) -> None:
+    """A listening endpoint already in use ended the recorder with a Zenoh traceback; it
+    is now one line naming the endpoint and the cause, and exit status 1."""
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        proc = start_recorder(tmp_path, unique_ns(), port)
+        try:
+            _, err = proc.communicate(timeout=60)
+        finally:
+            end(proc)
+    text = err.decode()
+    assert proc.returncode == 1, text
+    assert "Traceback" not in text
+    line = [ln for ln in text.splitlines() if ln.startswith("btrack record:")]
+    assert len(line) == 1, text
+    assert f"tcp/127.0.0.1:{port}" in line[0] and "Address already in use" in line[0]
+    assert ".rs:" not in line[0]  # Zenoh's source locations are left out

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import signal
+import socket
 import struct
 import zlib
 from pathlib import Path
@@ -226,3 +227,14 @@ def test_the_hardware_loop_with_a_fault_exits_2_naming_it(tmp_path):
     assert result.returncode == 2, result.stderr
     assert "--fault: not with --hil" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_a_port_something_listens_on_is_refused_before_a_process_starts(tmp_path, capsys):
+    """It was a run whose recorder died on the taken port while the others waited 60 s
+    on a listener that speaks no Zenoh; the launcher now refuses it by name."""
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        err = _refused(tmp_path, capsys, "--port", str(port))
+    assert f"--port {port}: something already listens on loopback port {port}" in err

@@ -11,6 +11,7 @@ import argparse
 import contextlib
 import json
 import os
+import re
 import sys
 import threading
 import time
@@ -18,6 +19,8 @@ from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 
 import zenoh
+
+from wire.errors import BusError
 
 
 @dataclass(frozen=True)
@@ -124,10 +127,16 @@ CONNECT_WAIT_S = 60.0
 CONNECT_RETRY_S = 1.0
 
 
+def readable(exc: Exception) -> str:
+    """Zenoh's error text without the Rust source locations it carries."""
+    return re.sub(r"\s+at \S+\.rs:\d+\.?", "", str(exc)).strip()
+
+
 def open_session(opts: SessionOptions, wait_s: float = CONNECT_WAIT_S) -> zenoh.Session:
     """A session of ``opts``; while none of its endpoints answers, tried again every
     second for up to ``wait_s`` seconds (one line on stderr when it starts waiting),
-    then Zenoh's error. Any other error (a bad configuration) is raised at once."""
+    then ``BusError``. Any other error (an endpoint in use, a bad configuration) is a
+    ``BusError`` at once."""
     zenoh.try_init_log_from_env()
     deadline = time.monotonic() + wait_s
     told = False
@@ -136,7 +145,7 @@ def open_session(opts: SessionOptions, wait_s: float = CONNECT_WAIT_S) -> zenoh.
             return zenoh.open(build_config(opts))
         except zenoh.ZError as exc:
             if "Unable to connect" not in str(exc) or time.monotonic() >= deadline:
-                raise
+                raise BusError(f"cannot open the bus: {readable(exc)}") from exc
             if not told:
                 where = ", ".join(opts.connect) or (
                     f"the endpoints of {opts.config_file}" if opts.config_file
