@@ -124,6 +124,12 @@ class AgentNode:
         self.newest_k = -1
         self.claims: dict[int, plausible.Claim] = {}
         self.parked: dict[tuple[int, int], list[tuple[str, AgentState]]] = {}
+        # A neighbour's state of tick k that came before its state of k-1 (one we have
+        # heard from before), kept until that one comes (then judged by the law from it)
+        # or until we decide tick k+1, the first that needs it (then judged without it):
+        # judged at once, a forgery sent early would meet only the looser check
+        # (agent.plausible) and could stand in for the real state of k, not here yet.
+        self.awaiting: dict[tuple[int, int], list[tuple[str, AgentState]]] = {}
         self.controller: Controller | None = None
         # A closed edge: whether the sensing says so, and the edge frame built from the
         # world's contour (None until a WorldInfo with one has come; ticks wait for it)
@@ -284,7 +290,7 @@ class AgentNode:
             return
         self.ring_edge = edge
 
-    def _judge(self, key: str, state: AgentState) -> None:
+    def _judge(self, key: str, state: AgentState, unawaited: bool = False) -> None:
         """A neighbour's well-formed state: kept if plausible (agent.plausible), else
         counted, logged and dropped, as if it never came: the tick waits for the real one
         as for a late state (a refused copy must not let it act without the real one)."""
@@ -300,19 +306,16 @@ class AgentNode:
             # neighbour's state of tick k before our own tick k+1. Every unlike copy of
             # a tick waits (a forgery may come before the real state or after it, and
             # neither may displace the other) and each is judged in turn.
-            rk = (state.robot, state.k)
-            held = self.parked.get(rk, [])
-            if any(state == other for _, other in held):
-                return
-            if len(held) >= COPIES_PARKED or (not held and len(self.parked) >= PARKED_STATES):
-                self._reject(key, f"too many states wait for tick {state.k}")
-                return
-            self.parked.setdefault(rk, []).append((key, state))
+            self._keep(self.parked, key, state)
             return
         lower, upper = self.membership.neighbours()
         side = "lower" if state.robot == lower else "upper" if state.robot == upper else None
         if side is not None:
             before = self.membership.latest(state.robot, state.k - 1)
+            if (not unawaited and before is not None and before.k < state.k - 1
+                    and state.k >= self.membership.last_k):
+                self._keep(self.awaiting, key, state)
+                return
             why = plausible.neighbour_problem(
                 state, self.robot, side, self.claims, before, self.gains.min_segment_m,
                 self.bounds.length if self.bounds is not None and self.closed else None)
@@ -327,6 +330,31 @@ class AgentNode:
             self._log_some(self.found, f"robot {state.robot}'s state of tick {state.k} came, "
                            "its token has not: it is live")
             self._follow_neighbours()
+        # the state its next one waited for: that one can be judged by the law now
+        for key_next, next_state in self.awaiting.pop((state.robot, state.k + 1), []):
+            self._judge(key_next, next_state)
+
+    def _keep(self, store: dict[tuple[int, int], list[tuple[str, AgentState]]], key: str,
+              state: AgentState) -> None:
+        """Keep ``state`` in ``store`` (``parked`` or ``awaiting``) to be judged later;
+        a copy of one kept is dropped, and past the store's bounds the state is refused."""
+        rk = (state.robot, state.k)
+        held = store.get(rk, [])
+        if any(state == other for _, other in held):
+            return
+        if len(held) >= COPIES_PARKED or (not held and len(store) >= PARKED_STATES):
+            self._reject(key, f"too many states wait for tick {state.k}")
+            return
+        store.setdefault(rk, []).append((key, state))
+
+    def _judge_awaiting(self, k: int) -> None:
+        """Before deciding tick ``k``: judge the states of ticks before it still waiting
+        for their sender's previous one, without it (it was lost, refused, or sent
+        before we listened)."""
+        for rk in sorted(rk for rk in self.awaiting if rk[1] < k):
+            # (judging one can release the next of its sender, already popped then)
+            for key, state in self.awaiting.pop(rk, []):
+                self._judge(key, state, unawaited=True)
 
     def _contested(self, key: str, state: AgentState, before: AgentState | None) -> bool:
         """A second plausible state of a neighbour's tick, unlike the one kept: one of
@@ -429,6 +457,7 @@ class AgentNode:
             k = self._ready_tick()
             if k is None:
                 continue
+            self._judge_awaiting(k)
             decision = self.membership.decide(k, time.monotonic())
             self._follow_neighbours()  # one live by its states alone may have gone silent
             if decision is Decision.STAND_STILL:
