@@ -11,7 +11,8 @@ import subprocess
 import sys
 import time
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -136,6 +137,16 @@ def open_when_accepted(conf: dict[str, Any], router: subprocess.Popen[bytes],
 
     wait_for(joins, timeout, what)
     return opened[0]
+
+
+@contextmanager
+def taken_port() -> Iterator[int]:
+    """A loopback port something listens on (a plain socket, speaking no Zenoh) for the
+    block's length."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        yield int(s.getsockname()[1])
 
 
 def wait_port(port: int, timeout_s: float = 60.0) -> None:

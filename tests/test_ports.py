@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import socket
 from pathlib import Path
 
 import zenoh
 
 from deploy.procs import EPHEMERAL_RANGE, LISTEN_PORTS_FROM, bindable, ephemeral_low, free_port
+from tests.procutil import taken_port
 from wire.errors import BusError
 from wire.session import SessionOptions, open_session, readable
 
@@ -35,17 +35,12 @@ def test_a_free_port_is_drawn_under_the_ephemeral_range_and_is_free() -> None:
 
 
 def test_a_port_being_listened_on_is_not_bindable() -> None:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        s.listen()
-        assert not bindable(s.getsockname()[1])
+    with taken_port() as port:
+        assert not bindable(port)
 
 
 def test_a_listener_on_a_taken_port_is_a_bus_error_without_rust_locations() -> None:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        s.listen()
-        port = s.getsockname()[1]
+    with taken_port() as port:
         opts = SessionOptions(ns="btrack/test-ports", listen=(f"tcp/127.0.0.1:{port}",),
                               multicast=False)
         try:

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -18,7 +17,7 @@ from pathlib import Path
 import zenoh
 from mcap.reader import make_reader
 
-from tests.procutil import end, free_port, unique_ns
+from tests.procutil import end, free_port, taken_port, unique_ns
 from wire import AgentState, Keys, Progress, Tick, Truth, WorldInfo, decode, encode
 from wire.session import SessionOptions, open_session
 
@@ -331,10 +330,7 @@ def test_the_launcher_says_what_a_recording_lacks(tmp_path: Path) -> None:
 def test_a_recorder_whose_endpoint_is_taken_says_so_in_one_line(tmp_path: Path) -> None:
     """A listening endpoint already in use ended the recorder with a Zenoh traceback; it
     is now one line naming the endpoint and the cause, and exit status 1."""
-    with socket.socket() as taken:
-        taken.bind(("127.0.0.1", 0))
-        taken.listen()
-        port = taken.getsockname()[1]
+    with taken_port() as port:
         proc = start_recorder(tmp_path, unique_ns(), port)
         try:
             _, err = proc.communicate(timeout=60)

@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import signal
-import socket
 import struct
 import zlib
 from pathlib import Path
@@ -12,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from deploy import launcher
-from tests.procutil import run_sim
+from tests.procutil import run_sim, taken_port
 
 
 @pytest.fixture(autouse=True)
@@ -232,9 +231,6 @@ def test_the_hardware_loop_with_a_fault_exits_2_naming_it(tmp_path):
 def test_a_port_something_listens_on_is_refused_before_a_process_starts(tmp_path, capsys):
     """It was a run whose recorder died on the taken port while the others waited 60 s
     on a listener that speaks no Zenoh; the launcher now refuses it by name."""
-    with socket.socket() as taken:
-        taken.bind(("127.0.0.1", 0))
-        taken.listen()
-        port = taken.getsockname()[1]
+    with taken_port() as port:
         err = _refused(tmp_path, capsys, "--port", str(port))
     assert f"--port {port}: something already listens on loopback port {port}" in err

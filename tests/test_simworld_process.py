@@ -7,7 +7,6 @@ import json
 import os
 import queue
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -18,21 +17,16 @@ from pathlib import Path
 
 import zenoh
 
+from tests.procutil import free_port
 from wire import Cmd, Keys, Sense, Tick, decode, encode
 
 ROOT = Path(__file__).resolve().parents[1]
 MSGPACK = zenoh.Encoding("application/msgpack")
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 @contextmanager
 def world_process(*extra: str) -> Iterator[tuple[subprocess.Popen[str], Keys, int]]:
-    port = _free_port()
+    port = free_port()
     ns = f"test/simworld-{uuid.uuid4().hex[:8]}"
     cmd = [
         sys.executable,
