@@ -88,4 +88,9 @@ def join_segment(
         hi = lower.hi
     if not lo < hi:  # neighbours' claims out of order: split what lies between them
         lo, hi = min(lo, hi), max(lo, hi)
+    if not lo < hi and lower is not None and upper is not None:
+        # their middles coincide (both claim the same stretch, as no two live robots
+        # should): from the middle of the lower's lower half to the middle of the upper's
+        # upper half, never an empty segment nor one past a neighbour
+        lo, hi = 0.5 * (lower.lo + lo), 0.5 * (hi + upper.hi)
     return lo, hi

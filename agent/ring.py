@@ -89,10 +89,13 @@ def ring_join_arc(lower: SegmentView | None, upper: SegmentView | None, length: 
         return upper.lo, 0.5 * (upper.lo + upper.hi)
     if upper is None:
         return 0.5 * (lower.lo + lower.hi), lower.hi
+    shift = frame_shift(upper.lo, lower.hi, length)
     lo = 0.5 * (lower.lo + lower.hi)
-    hi = 0.5 * (upper.lo + upper.hi) + frame_shift(upper.lo, lower.hi, length)
+    hi = 0.5 * (upper.lo + upper.hi) + shift
     if not lo < hi:  # claims out of order: split what lies between them
         lo, hi = hi, lo
+    if not lo < hi:  # their middles coincide: the chain's rule (join_segment), never empty
+        lo, hi = 0.5 * (lower.lo + lo), 0.5 * (hi + upper.hi + shift)
     return lo, min(hi, lo + length)
 
 

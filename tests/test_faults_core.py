@@ -81,6 +81,16 @@ def test_joining_robot_never_claims_past_a_live_neighbour_it_has_not_heard():
     assert join_segment(None, upper, 0.0, 6.0) == (0.0, 4.5)
 
 
+def test_a_join_between_neighbours_claiming_the_same_stretch_is_never_empty():
+    # both neighbours' segments have the same middle (as no two live robots should, but
+    # the bus may say so): the middle half of that stretch, and a controller can start on
+    # it; never to an end of the edge past a live neighbour
+    same = SegmentView(0.0, 3.1, 0.6)
+    assert join_segment(same, same, 0.0, 6.0) == pytest.approx((0.775, 2.325))
+    assert join_segment(SegmentView(1.0, 2.0, 0.6), SegmentView(0.5, 2.5, 0.6),
+                        0.0, 6.0) == pytest.approx((1.25, 2.0))
+
+
 def test_segment_union_measures_gap_and_overlap():
     lo, hi = np.array([0.0, 2.0, 4.5]), np.array([2.0, 4.0, 6.0])
     assert segment_union(lo, hi, 0.0, 6.0) == pytest.approx((0.5, 0.0))

@@ -34,6 +34,10 @@ def test_a_joiner_claims_from_the_middle_of_one_neighbour_s_arc_to_the_other_s()
                          same=True) == (11.0, 15.0)
     with pytest.raises(ValueError):
         ring_join_arc(None, None, 12.0)
+    # two neighbours claiming the same arc (the bus may say so): its middle half, never
+    # an empty claim
+    assert ring_join_arc(SegmentView(2.0, 6.0, 1.0), SegmentView(2.0, 6.0, 1.0),
+                         12.0) == (3.0, 5.0)
 
 
 def _tiles(arcs: list[tuple[float, float]], length: float) -> None:
