@@ -193,6 +193,10 @@ class Membership(Generic[S]):
             del self._followed_at[rid]
             del self._states[rid]
             self._mute.discard(rid)
+            # live to us by its states alone, which we no longer follow (a nearer robot
+            # came between): no longer live to us, until its token or a state says so
+            self._proven.discard(rid)
+            self._held.discard(rid)
         followed = wanted | self.candidates()
         for rid in set(self._states) - followed:
             del self._states[rid]
