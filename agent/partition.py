@@ -83,9 +83,11 @@ def join_segment(
     lo = edge_lo if lower is None else 0.5 * (lower.lo + lower.hi)
     hi = edge_hi if upper is None else 0.5 * (upper.lo + upper.hi)
     if lower is None and lower_unheard and upper is not None:
-        lo = upper.lo
+        # (halfway to the middle if the upper one claims down to the end: no live robot
+        # below it should, but the bus may say so)
+        lo = upper.lo if upper.lo > edge_lo else 0.5 * (upper.lo + hi)
     if upper is None and upper_unheard and lower is not None:
-        hi = lower.hi
+        hi = lower.hi if lower.hi < edge_hi else 0.5 * (lo + lower.hi)
     if not lo < hi:  # neighbours' claims out of order: split what lies between them
         lo, hi = min(lo, hi), max(lo, hi)
     if not lo < hi and lower is not None and upper is not None:

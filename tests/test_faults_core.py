@@ -79,6 +79,12 @@ def test_joining_robot_never_claims_past_a_live_neighbour_it_has_not_heard():
     # a heard neighbour on that side, or a real end of the chain, as before
     assert join_segment(lower, upper, 0.0, 6.0, lower_unheard=True) == (1.5, 4.5)
     assert join_segment(None, upper, 0.0, 6.0) == (0.0, 4.5)
+    # the heard one claims to the end past the unheard one (the bus may say so): the claim
+    # still stops short of the end
+    assert join_segment(None, SegmentView(0.0, 3.0, 1.5), 0.0, 6.0,
+                        lower_unheard=True) == pytest.approx((0.75, 1.5))
+    assert join_segment(SegmentView(3.0, 6.0, 1.5), None, 0.0, 6.0,
+                        upper_unheard=True) == pytest.approx((4.5, 5.25))
 
 
 def test_a_join_between_neighbours_claiming_the_same_stretch_is_never_empty():

@@ -450,6 +450,10 @@ def runs(draw):
 # a long run of this test): a KeyError
 @example(run=(1, 0, False, 0.1, [("alive", 2, True), ("heard", -1, 0, 0, 31),
                                  ("alive", 2, False), ("alive", 1, True), ("alive", 2, True)]))
+# a joiner whose upper neighbour claims down to the edge's end past the live, unheard lower
+@example(run=(2, 1, True, 0.0, [("alive", 0, True), ("alive", 2, True), ("tick", 1, 0),
+                                ("heard", -1, 0, 0, 31), ("tick", 1, 3), ("tick", 1, 7),
+                                ("tick", 1, 3)]))
 def test_membership_invariants_over_random_event_sequences(run):
     team, robot, joining, grace_s, sequence = run
     timeout_s = 0.3
