@@ -26,6 +26,7 @@ import queue
 import signal
 import sys
 import time
+import traceback
 from collections.abc import Callable
 from typing import Any
 
@@ -116,6 +117,11 @@ class AgentNode:
         self.rejected = 0
         self.ticks = 0
         self.timeouts = 0  # ticks acted on without a neighbour's state, its wait over
+        # faults of our own (an exception from a core on a message or a tick, which the
+        # checks let through): counted and logged; the robot is told to stand still for
+        # that tick and the controller goes on with the next
+        self.faults = 0
+        self.halted_k = -1  # the last tick given up on for a fault
         # What a neighbour's state is judged by (agent.plausible): the edge and limits, set
         # from the first Sense; our newest tick; our own recent claims by tick; and the
         # states of ticks we have no sensing of yet (all of them before the first Sense),
@@ -416,7 +422,8 @@ class AgentNode:
         """The newest tick after the last one done with both its Sense and its Pose."""
         if self.closed and self.ring_edge is None:
             return None  # the contour has not come yet
-        ready = [k for k in self.senses if k > self.membership.last_k and k in self.poses]
+        done = max(self.membership.last_k, self.halted_k)
+        ready = [k for k in self.senses if k > done and k in self.poses]
         if not ready:
             return None
         k = max(ready)
@@ -453,30 +460,57 @@ class AgentNode:
                 kind, data = inbox.popleft()
                 if kind == "stop":
                     return
-                self._handle(kind, data)
+                try:
+                    self._handle(kind, data)
+                except Exception as exc:  # noqa: BLE001 - a fault of ours: see _fault
+                    self._fault(f"a {kind} message", exc)
             k = self._ready_tick()
             if k is None:
                 continue
-            self._judge_awaiting(k)
-            decision = self.membership.decide(k, time.monotonic())
-            self._follow_neighbours()  # one live by its states alone may have gone silent
-            if decision is Decision.STAND_STILL:
-                self._stand_still(k)  # joining a running team: claim once we hear them
-            elif decision is Decision.ACT:
-                if self.membership.timed_out:
-                    self.timeouts += 1
-                    what = f"a neighbour's state of tick {k - 1}" if k else "the whole team"
-                    self._log_some(self.timeouts, f"tick {k}: acted without {what}, after "
-                                   f"waiting {self.membership.waited_s:.2f} s "
-                                   f"(#{self.timeouts})")
-                self._tick(k)
-            # WAIT: a neighbour's state may still come; we wake by membership.deadline
+            try:
+                self._decide(k)
+            except RingGainsError:
+                raise  # the configuration, not a fault: the agent refuses it (main)
+            except Exception as exc:  # noqa: BLE001 - a fault of ours: see _fault
+                self._fault(f"tick {k}", exc)
+                self.halted_k = k
+                self._stand_still(k)
+
+    def _fault(self, what: str, exc: Exception) -> None:
+        """An exception of our own code on something from the bus that the checks let
+        through: it must not end the robot's controller. It is counted and logged (the
+        first ones with their traceback, for the bug report); the message is dropped, or
+        the tick given up on with a zero command."""
+        self.faults += 1
+        lines = (traceback.format_exception(exc) if self.faults <= 3
+                 else traceback.format_exception_only(exc))
+        self._log_some(self.faults, f"fault #{self.faults} on {what}, dropped: "
+                       + "".join(lines).rstrip())
+
+    def _decide(self, k: int) -> None:
+        """Tick ``k``'s sensing and pose are in: judge what waited for it, ask membership,
+        and act, stand still or wait."""
+        self._judge_awaiting(k)
+        decision = self.membership.decide(k, time.monotonic())
+        self._follow_neighbours()  # one live by its states alone may have gone silent
+        if decision is Decision.STAND_STILL:
+            self._stand_still(k)  # joining a running team: claim once we hear them
+        elif decision is Decision.ACT:
+            if self.membership.timed_out:
+                self.timeouts += 1
+                what = f"a neighbour's state of tick {k - 1}" if k else "the whole team"
+                self._log_some(self.timeouts, f"tick {k}: acted without {what}, after "
+                               f"waiting {self.membership.waited_s:.2f} s "
+                               f"(#{self.timeouts})")
+            self._tick(k)
+        # WAIT: a neighbour's state may still come; we wake by membership.deadline
 
     def _stand_still(self, k: int) -> None:
-        """Tick k of an agent joining a running team before it has heard its neighbours:
-        a zero command, so the world need not wait for us, and no state, so the
-        neighbours keep their segments. Their states of tick k then reach us (our
-        subscriptions are in place by now), and at k+1 we claim our share of them.
+        """Tick k of an agent joining a running team before it has heard its neighbours
+        (or one given up on for a fault): a zero command, so the world need not wait for
+        us, and no state, so the neighbours keep their segments. Their states of tick k
+        then reach us (our subscriptions are in place by now), and at k+1 we claim our
+        share of them.
         Claiming sooner would take a neighbour not heard yet for the end of the chain
         and claim the edge up to its end."""
         sense = self.sense
@@ -585,6 +619,7 @@ def main(argv: list[str] | None = None) -> int:
         finally:
             node.close()
             print(json.dumps({"agent": args.id, "ticks": node.ticks, "dropped": node.dropped,
-                              "rejected": node.rejected, "timeouts": node.timeouts}),
+                              "rejected": node.rejected, "timeouts": node.timeouts,
+                              "faults": node.faults}),
                   flush=True)
     return 0

@@ -37,6 +37,7 @@ from deploy.procs import (
     forward_flags,
     free_port,
     non_negative,
+    own_faults,
     stop_interrupted,
     stop_on_sigterm,
     wait_listening,
@@ -587,6 +588,9 @@ def run(args: argparse.Namespace) -> int:
             if injector.refused:
                 print(f"btrack sim: {injector.refused} world ticks were refused as "
                       "implausible (not the next tick)", file=sys.stderr)
+            faulty = own_faults(group.children)
+            if faulty:
+                print(f"btrack sim: {faulty}", file=sys.stderr)
     except KeyboardInterrupt as exc:
         return stop_interrupted(group, exc, "btrack sim")
     finally:

@@ -165,6 +165,18 @@ class Child:
             return ""
 
 
+def own_faults(children: list[Child]) -> str | None:
+    """A line naming the agents that counted faults of their own (an exception of our
+    code that cost a tick: a bug to report, with their logs), from their closing lines;
+    None if there were none."""
+    faulty = [f"{c.name} {n} ({c.log_path})" for c in children
+              if c.name.startswith("agent") and (n := c.last_json().get("faults"))]
+    if not faulty:
+        return None
+    return ("faults of our own code, each a tick stood still (a bug: please report it, "
+            "with the log): " + ", ".join(faulty))
+
+
 @dataclass
 class ProcessGroup:
     """All processes a launcher started; ``stop_all`` ends every one of them."""

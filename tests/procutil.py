@@ -205,6 +205,9 @@ def timing_parted(run_dir: Path) -> list[str]:
         if last.get("timeouts"):
             why.append(f"agent {last['agent']} acted {last['timeouts']} time(s) without "
                        "a neighbour's state")
+        if last.get("faults"):
+            why.append(f"agent {last['agent']} gave up {last['faults']} tick(s) for a "
+                       "fault of its own")
     return why
 
 

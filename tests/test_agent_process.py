@@ -40,15 +40,34 @@ def neighbour_state(robot: int, k: int, lo: float, hi: float) -> AgentState:
                       edge_lo=0.0, edge_hi=6.0)
 
 
+# Run before the agent's own code in its process: its control core raises on its second
+# step (a fault of ours that the checks let through; none is known, so one is put in
+# below the process's boundary).
+FAULTY_CONTROLLER = """
+import sys
+from agent.controller import Controller
+from btrack.cli import main
+real_step, steps = Controller.step, []
+def step(self, *args, **kwargs):
+    steps.append(None)
+    if len(steps) == 2:
+        raise ZeroDivisionError("injected into the control core")
+    return real_step(self, *args, **kwargs)
+Controller.step = step
+raise SystemExit(main(sys.argv[1:]))
+"""
+
+
 @contextmanager
 def agent1(bus: tuple[str, int, zenoh.Session], log: Path, neighbours: tuple[int, ...] = (),
-           *extra: str) -> Iterator[tuple[subprocess.Popen[bytes], Keys,
+           *extra: str, inject: str | None = None) -> Iterator[tuple[subprocess.Popen[bytes], Keys,
                                           queue.SimpleQueue[AgentState],
                                           queue.SimpleQueue[Cmd]]]:
     """Agent 1 of a team of three, a real process on the test's bus, once it is alive;
     the test holds the liveliness tokens of ``neighbours`` and plays the world. Yields
     the process, the keys, and queues of agent 1's states and commands; ends the agent
-    and checks that it exited cleanly."""
+    and checks that it exited cleanly. ``inject``: Python source that runs the agent
+    (``btrack.cli.main`` on its arguments) in place of ``python -m btrack``."""
     ns, port, session = bus
     keys = Keys(ns)
     states: queue.SimpleQueue[AgentState] = queue.SimpleQueue()
@@ -60,7 +79,13 @@ def agent1(bus: tuple[str, int, zenoh.Session], log: Path, neighbours: tuple[int
     session.declare_subscriber(keys.cmd(1), lambda s: cmds.put(decode(Cmd, s.payload.to_bytes())))
     session.liveliness().declare_subscriber(keys.alive(1), lambda s: alive.put(str(s.kind)))
     tokens = [session.liveliness().declare_token(keys.alive(i)) for i in neighbours]
-    proc = start(["agent", "--id", "1", "--robots", "3", *extra, *member_args(ns, port)], log)
+    args = ["agent", "--id", "1", "--robots", "3", *extra, *member_args(ns, port)]
+    if inject is None:
+        proc = start(args, log)
+    else:
+        proc = subprocess.Popen([sys.executable, "-c", inject, *args], stdin=subprocess.DEVNULL,
+                                stdout=subprocess.PIPE, stderr=open(log, "wb"),  # noqa: SIM115
+                                start_new_session=True)
     try:
         alive.get(timeout=30)
         yield proc, keys, states, cmds
@@ -137,6 +162,37 @@ def test_agent_survives_garbage_and_counts_it(bus, tmp_path):
         assert state.dropped == len(bad)
         assert math.isfinite(cmd.v) and math.isfinite(cmd.omega)
         assert 0.0 <= state.phase < 2 * math.pi and state.lo < state.hi
+
+
+def test_a_fault_in_the_control_core_costs_one_tick_not_the_agent(bus, tmp_path):
+    """An exception of our own code on a tick (here put into the controller's second
+    step) does not end the agent: the tick gets a zero command and no state, the fault
+    is counted and logged with its traceback, and the next tick is controlled as usual."""
+    session, log = bus[2], tmp_path / "agent.log"
+    with agent1(bus, log, (0, 2), "--neighbour-timeout", "0.3",
+                inject=FAULTY_CONTROLLER) as (proc, keys, states, cmds):
+        pub0, pub2 = neighbour_publishers(session, keys)
+        got: list[tuple[Cmd, AgentState | None]] = []
+        for k in range(4):
+            if k > 0:
+                pub0.put(encode(neighbour_state(0, k - 1, 0.0, 2.0)))
+                pub2.put(encode(neighbour_state(2, k - 1, 4.0, 6.0)))
+            sense_and_pose(session, keys, k, x=2.05)
+            cmd = cmds.get(timeout=10)
+            state = states.get(timeout=10) if k != 1 else None
+            got.append((cmd, state))
+        assert [c.k for c, _ in got] == [0, 1, 2, 3]
+        assert (got[1][0].v, got[1][0].omega) == (0.0, 0.0)  # the faulty tick: stand still
+        assert [s.k for _, s in got if s is not None] == [0, 2, 3]
+        assert got[2][0].v != 0.0  # controlled again
+        time.sleep(0.3)
+        assert states.empty()  # no state of tick 1 came late either
+        assert proc.poll() is None
+    out = json.loads(proc.stdout.read().decode().strip().splitlines()[-1])  # type: ignore[union-attr]
+    assert (out["faults"], out["ticks"]) == (1, 3)
+    text = log.read_text()
+    assert "fault #1 on tick 1, dropped" in text and "ZeroDivisionError: injected" in text
+    assert "Traceback" in text
 
 
 def test_an_agent_that_acts_without_a_neighbours_state_says_so(bus, tmp_path):
