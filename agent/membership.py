@@ -358,8 +358,11 @@ class Membership(Generic[S]):
         of the team as started, without one); their tokens are not up to us."""
         lower, upper = self.neighbours()
         if self.ring:  # round the ring, up to the neighbour on each side
-            below = [(self.robot - j) % self.team for j in range(1, self.team)]
-            above = [(self.robot + j) % self.team for j in range(1, self.team)]
+            # (a ring's order is by id: one past the team, which joined, sits between
+            # the highest and robot 0)
+            n = max(self.team, *(r + 1 for r in self._live | self._proven | {self.robot}))
+            below = [(self.robot - j) % n for j in range(1, n)]
+            above = [(self.robot + j) % n for j in range(1, n)]
         else:
             below = list(range(self.robot - 1, -1 if lower is None else lower, -1))
             above = list(range(self.robot + 1, self.team if upper is None else upper))

@@ -18,6 +18,7 @@ from agent.membership import (
     Stage,
 )
 from agent.partition import SegmentView
+from agent.ring import ring_neighbours
 
 EDGE = (0.0, 6.0)
 ACT, WAIT, STILL = Decision.ACT, Decision.WAIT, Decision.STAND_STILL
@@ -613,3 +614,57 @@ def test_a_joiner_claims_with_the_neighbours_its_decision_left():
     assert m.decide(200, 0.0) is WAIT
     assert m.decide(200, 0.3) is ACT and m.neighbours() == (None, 2)
     assert m.first_segment(200, *EDGE) == initial_segment(0, 1, *EDGE)
+
+
+RING_EVENTS = st.lists(st.one_of(
+    st.tuples(st.just("alive"), IDS, st.booleans()),
+    # a state of a tick near the one being decided, its arc anywhere in a turn (in the
+    # sender's frame: up to a turn off ours), of a neighbour (-2 lower, -1 upper) or any id
+    st.tuples(st.just("heard"), st.one_of(st.sampled_from([-1, -2]), IDS), st.integers(-3, 2),
+              st.integers(-60, 60), st.integers(1, 60)),
+    st.tuples(st.just("tick"), st.integers(1, 3), st.integers(0, 7)),
+), max_size=30)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(1, MAX_TEAM), st.data(), st.booleans(), st.sampled_from([0.0, 0.1, 0.5]),
+       RING_EVENTS)
+def test_ring_membership_invariants_over_random_event_sequences(team, data, joining, grace_s,
+                                                                 sequence):
+    """Round a ring, whatever comes in whatever order: no exception; the neighbours are
+    the nearest live ids round the ring; states are kept of them only; a first claim is
+    a non-empty arc of at most a turn."""
+    robot = data.draw(st.integers(0, team - 1))
+    length = EDGE[1] - EDGE[0]
+    m: Membership[SegmentView] = Membership(robot, team, neighbour_timeout_s=0.3, ring=True,
+                                            token_grace_s=grace_s)
+    live: set[int] = set()
+    now, k = 0.0, 200 if joining else 0
+    for event in sequence:
+        if event[0] == "alive":
+            _, rid, up = event
+            m.alive(rid, up)
+            if rid != robot:
+                (live.add if up else live.discard)(rid)
+        elif event[0] == "heard":
+            _, rid, dk, lo, span = event
+            who = m.neighbours()[rid + 2] if rid < 0 else rid
+            if who is not None:
+                kept = m.heard(who, k + dk, seg(0.1 * lo, 0.1 * (lo + span)))
+                assert kept == (who in m.neighbours())
+        else:
+            _, skip, steps = event
+            now += 0.1 * steps
+            decision = m.decide(k, now)
+            if decision is ACT and k > 0:
+                lo, hi = m.first_segment(k, *EDGE)
+                assert 0.0 < hi - lo <= length + 1e-9
+            k += skip if decision is not WAIT else skip - 1
+        assert m.live == live
+        assert m.held <= m.proven and m.held <= set(m.neighbours())
+        known = (live | m.proven) - {robot}
+        expected = ring_neighbours(robot, sorted(known | {robot})) if known else (None, None)
+        assert m.neighbours() == expected
+        for rid in range(MAX_TEAM + 3):
+            if rid not in m.neighbours():
+                assert m.latest(rid, 10**6) is None
