@@ -57,6 +57,7 @@ from wire.tickorder import TickOrder
 
 MAX_ROBOTS = 100  # one machine's processes: beyond this a run fails slowly, not at once
 PROGRESS_QUERY_S = 0.5  # longest wait for the recorder's answer to a progress query
+STATES_AHEAD_S = 1.0  # agents' states this far from the latest tick heard: said so
 BACKGROUND_NICE = 10  # the recorder (the team's router) is off the lockstep's path
 # From this many robots on the agents are clients of the team's router, not peers: a
 # peer mesh holds a link per pair and at 50 robots ran 3x slower, its recorder missing
@@ -194,13 +195,12 @@ class Monitor:
 
     def errors(self) -> tuple[float, float]:
         """Mean |phase error| and |workload error| over neighbour pairs, as the agents
-        themselves see them (the report measures against truth); live agents only."""
+        themselves see them (the report measures against truth), at ``states_t``: the
+        agents still publishing (the recorder leaves out those that stopped)."""
         p = self.progress
         if p is None:
             return float("nan"), float("nan")
-        live = set(p.live)
-        rows = [(ph, w) for r, ph, w in zip(p.robots, p.phase, p.workload, strict=True)
-                if r in live]
+        rows = list(zip(p.phase, p.workload, strict=True))
         ep, ew = [], []
         for (pa, wa), (pb, wb) in zip(rows, rows[1:], strict=False):
             ep.append(abs(wrap_pi(pb - pa)))
@@ -718,8 +718,12 @@ def _progress_line(monitor: Monitor, duration: float, last_t: float, wall_s: flo
         f"stalled for {wall_s:.0f} s")
     fmt = lambda x: "n/a" if math.isnan(x) else f"{x:.3f}"  # noqa: E731
     ep, ew = monitor.errors()
+    # under load the recorder hears the agents' states well before the world's ticks:
+    # the errors are then of a later time, which the line says
+    ahead = (f" (agents at {p.states_t:.1f} s)"
+             if p.states_t >= 0 and abs(p.states_t - t) > STATES_AHEAD_S else "")
     return (f"t = {t:7.1f} / {duration:g} s  {speed}  |e_phi| {fmt(ep)} rad  "
-            f"|e_psi| {fmt(ew)} m^2  live {p.live}")
+            f"|e_psi| {fmt(ew)} m^2{ahead}  live {p.live}")
 
 
 def _wait_for_recorder(recorder: Child, monitor: Monitor) -> None:

@@ -102,8 +102,11 @@ class Recording:
         self.last_t_ns = 0  # the latest simulation time seen, for messages without one
         self._routes: dict[str, tuple[type | None, int]] = {}
         # For progress: each robot's recent states by tick, and the latest tick with the
-        # states of that tick (or the latest before it), a consistent picture. The pair
-        # is read from a Zenoh thread: replaced whole, never changed in place.
+        # states of the newest tick every current robot (one whose newest state is among
+        # the newest few ticks) has published, a consistent picture: under load the
+        # world's messages, on one link, come far behind the agents' on theirs, and the
+        # states of the latest tick heard are long gone. The pair is read from a Zenoh
+        # thread: replaced whole, never changed in place.
         self._recent: dict[int, dict[int, AgentState]] = {}
         self.latest: tuple[Tick, dict[int, AgentState]] | None = None
 
@@ -250,12 +253,20 @@ class Recording:
         self.last_tick = tick
         if tick.done:
             self.done = True
-        states = {}
-        for robot, recent in self._recent.items():
-            ks = [k for k in recent if k <= tick.k]
-            if ks:
-                states[robot] = recent[max(ks)]
-        self.latest = (tick, states)
+        self.latest = (tick, self._newest_common())
+
+    def _newest_common(self) -> dict[int, AgentState]:
+        """The states of the newest tick that every current robot has a state of."""
+        newest = {robot: max(recent) for robot, recent in self._recent.items() if recent}
+        if not newest:
+            return {}
+        top = max(newest.values())
+        current = [robot for robot, k in newest.items() if k >= top - RECENT_TICKS]
+        common = set.intersection(*(set(self._recent[robot]) for robot in current))
+        if not common:
+            return {}
+        k = max(common)
+        return {robot: self._recent[robot][k] for robot in current}
 
     def _handle_unknown(self, topic: str, cid: int, payload: bytes, log_ns: int) -> None:
         try:
@@ -295,14 +306,16 @@ class Recording:
         self.messages += 1
 
     def progress(self) -> Progress | None:
-        """The run so far as recorded: the latest tick and every robot's latest phase
-        and workload; None before the first tick."""
+        """The run so far as recorded: the latest tick, and the current robots' phases
+        and workloads of the newest tick they all published; None before the first
+        tick."""
         if self.latest is None:
             return None
         tick, states = self.latest
         robots = sorted(states)
         return Progress(tick.t, tick.k, tick.live, tick.wall_ns, tick.done, robots,
-                        [states[r].phase for r in robots], [states[r].workload for r in robots])
+                        [states[r].phase for r in robots], [states[r].workload for r in robots],
+                        states[robots[0]].t if robots else -1.0)
 
     def summary(self) -> dict[str, int]:
         last = self.last_tick

@@ -3,6 +3,7 @@ the bus, stores garbage as an invalid record, and stops by itself on the final t
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import signal
 import subprocess
@@ -14,6 +15,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+import pytest
 import zenoh
 from mcap.reader import make_reader
 
@@ -133,6 +135,33 @@ def state(k: int) -> AgentState:
     )
 
 
+def test_progress_gives_the_agents_newest_common_tick_when_the_worlds_lag(
+        tmp_path: Path) -> None:
+    """Under load the recorder hears the agents' states far ahead of the world's ticks
+    (the world's one link falls behind the agents' many): progress then gives the
+    phases of the newest tick every robot still publishing has a state of, and its time,
+    not nothing. A robot whose states stopped is left out."""
+    with recorder_on_bus(tmp_path) as (_, keys, session):
+        info = WorldInfo(map="no-algae", start="in-phase", robots=3, localization="truth",
+                         seed=1, duration_s=10.0, dt=0.1, edge_lo=0.0, edge_hi=6.0, bin_m=0.1,
+                         patrol_depth=[0.3] * 60, robot_radius=0.17, min_depth=0.3,
+                         margin_out=0.3)
+        session.put(keys.world_info(), encode(info))
+        session.put(keys.world_tick(), encode(Tick(0.0, 0, [0, 1, 2])))
+        for k in range(31):
+            for robot in (0, 1, 2) if k <= 10 else (0, 1):  # robot 2 stops at tick 10
+                if robot == 1 and k == 30:
+                    continue  # robot 1's state of tick 30 is not in yet
+                session.put(keys.state(robot), encode(dataclasses.replace(
+                    state(k), robot=robot, phase=0.1 * robot + 0.01 * k)))
+        session.put(keys.world_tick(), encode(Tick(0.1, 1, [0, 1, 2])))
+        progress = ask_progress(session, keys, lambda p: p.k == 1)
+        assert progress.t == pytest.approx(0.1) and progress.live == [0, 1, 2]
+        assert progress.robots == [0, 1] and progress.states_t == pytest.approx(2.9)
+        assert progress.phase == pytest.approx([0.29, 0.39])
+        session.put(keys.world_tick(), encode(Tick(9.9, 99, [0, 1], done=True)))
+
+
 def test_recorder_records_and_stops_on_final_tick(tmp_path: Path) -> None:
     with recorder_on_bus(tmp_path) as (proc, keys, session):
         token = session.liveliness().declare_token(keys.alive(0))
@@ -161,6 +190,7 @@ def test_recorder_records_and_stops_on_final_tick(tmp_path: Path) -> None:
         progress = ask_progress(session, keys, lambda p: p.k == 2)
         assert (progress.t, progress.live, progress.done) == (0.2, [0], False)
         assert (progress.robots, progress.phase, progress.workload) == ([0], [0.5], [0.6])
+        assert progress.states_t == pytest.approx(0.2)
         session.put(keys.state(0), b"\x93\x01\x02")  # a msgpack list, not a state
         session.put(keys.world_tick(), encode(Tick(0.3, 3, [0], done=True)))
         out, err = proc.communicate(timeout=30)

@@ -275,8 +275,10 @@ class Tick:
 @dataclass(frozen=True)
 class Progress:
     """How far a run has got, as recorded (the recorder's answer to a query, for
-    progress lines): the latest Tick, and each robot's latest phase and workload as
-    its agent published them."""
+    progress lines): the latest Tick; and the phase and workload of each robot with a
+    state of the newest tick all current robots have published (``states_t``, its
+    time; -1 without one), as their agents published them. The two can be far apart:
+    under load, the recorder hears the world's one link behind the agents' many."""
 
     t: float
     k: int
@@ -286,11 +288,14 @@ class Progress:
     robots: list[int]
     phase: list[float]
     workload: list[float]
+    states_t: float = -1.0
 
     def check(self) -> None:
         _require(self.t >= 0 and self.k >= 0 and self.wall_ns >= 0, "negative t, k or wall_ns")
         _require(len(self.phase) == len(self.robots) == len(self.workload),
                  "robots, phase and workload: one entry per robot")
+        _require(self.states_t >= 0 or (self.states_t == -1.0 and not self.robots),
+                 "states_t: the states' time, or -1 without states")
 
 
 @dataclass(frozen=True)
