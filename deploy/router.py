@@ -13,6 +13,7 @@ import sys
 import threading
 from typing import Any
 
+from wire.errors import BusError
 from wire.session import add_session_args, open_session, options_from_args
 
 
@@ -43,7 +44,10 @@ def main(argv: list[str] | None = None) -> int:
         signal.signal(sig, on_signal)
     try:
         session = open_session(options_from_args(args))
-    except Exception as exc:  # zenoh raises its own error type for a bad endpoint or cert
+    except BusError as exc:  # an endpoint in use, a bad endpoint or certificate: it says
+        print(f"btrack router: {exc}", file=sys.stderr)
+        return 1
+    except Exception as exc:  # what Zenoh raises before a session is tried
         print(f"btrack router: cannot start: {exc}", file=sys.stderr)
         return 1
     print(f"btrack router: {session.info.zid()} routing", flush=True)

@@ -4,6 +4,8 @@ segment, and the wall-time waits driven by the time passed in."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
@@ -433,6 +435,25 @@ EVENTS = st.lists(st.one_of(
 ), max_size=30)
 
 
+def feed(m: Membership[SegmentView], event: tuple, k: int, live: set[int],
+         segment: Callable[[int, int], SegmentView]) -> int | None:
+    """Give membership an "alive" or "heard" event (the heard segment from its two
+    numbers), keeping ``live`` as the tokens say; the robot heard from, if any. A state
+    is kept exactly when its robot is a neighbour."""
+    if event[0] == "alive":
+        _, rid, up = event
+        m.alive(rid, up)
+        if rid != m.robot:
+            (live.add if up else live.discard)(rid)
+        return None
+    _, rid, dk, a, b = event
+    who = m.neighbours()[rid + 2] if rid < 0 else rid
+    if who is not None:
+        kept = m.heard(who, k + dk, segment(a, b))
+        assert kept == (who in m.neighbours())
+    return who
+
+
 @st.composite
 def runs(draw):
     team = draw(st.integers(1, MAX_TEAM))
@@ -469,18 +490,10 @@ def test_membership_invariants_over_random_event_sequences(run):
     still_began: float | None = None
     for event in sequence:
         stage_before, last_before = m.stage, m.last_k
-        if event[0] == "alive":
-            _, rid, up = event
-            m.alive(rid, up)
-            if rid != robot:
-                (live.add if up else live.discard)(rid)
-        elif event[0] == "heard":
-            _, rid, dk, lo, hi = event
-            who = m.neighbours()[rid + 2] if rid < 0 else rid
+        if event[0] != "tick":
+            who = feed(m, event, k, live, lambda lo, hi: seg(0.1 * lo, 0.1 * hi))
             if who is not None:
                 spoke.add(who)
-                kept = m.heard(who, k + dk, seg(0.1 * lo, 0.1 * hi))
-                assert kept == (who in m.neighbours())
         else:
             _, skip, steps = event
             now += 0.1 * steps
@@ -641,17 +654,8 @@ def test_ring_membership_invariants_over_random_event_sequences(team, data, join
     live: set[int] = set()
     now, k = 0.0, 200 if joining else 0
     for event in sequence:
-        if event[0] == "alive":
-            _, rid, up = event
-            m.alive(rid, up)
-            if rid != robot:
-                (live.add if up else live.discard)(rid)
-        elif event[0] == "heard":
-            _, rid, dk, lo, span = event
-            who = m.neighbours()[rid + 2] if rid < 0 else rid
-            if who is not None:
-                kept = m.heard(who, k + dk, seg(0.1 * lo, 0.1 * (lo + span)))
-                assert kept == (who in m.neighbours())
+        if event[0] != "tick":
+            feed(m, event, k, live, lambda lo, span: seg(0.1 * lo, 0.1 * (lo + span)))
         else:
             _, skip, steps = event
             now += 0.1 * steps

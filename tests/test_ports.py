@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 
 import zenoh
@@ -60,3 +62,14 @@ def test_readable_drops_only_source_locations() -> None:
            "/root/.cargo/git/a/io/tcp.rs:61.] at /root/.cargo/b/unicast.rs:338.")
     assert readable(RuntimeError(raw)) == (
         "Can not create a listener: [x: Address in use (os error 98)]")
+
+
+def test_a_router_on_a_taken_port_says_so_in_one_line() -> None:
+    with taken_port() as port:
+        done = subprocess.run([sys.executable, "-m", "btrack", "router", "--mode", "router",
+                               "--listen", f"tcp/127.0.0.1:{port}", "--no-multicast"],
+                              capture_output=True, text=True, timeout=60)
+    assert done.returncode == 1
+    assert done.stderr.startswith("btrack router: cannot open the bus:"), done.stderr
+    assert f"127.0.0.1:{port}" in done.stderr and "Traceback" not in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1 and "cannot start" not in done.stderr

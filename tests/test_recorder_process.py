@@ -135,6 +135,14 @@ def state(k: int) -> AgentState:
     )
 
 
+def ten_seconds(robots: int) -> WorldInfo:
+    """The world of a ten-second run of ``robots`` on a 6 m edge."""
+    return WorldInfo(map="no-algae", start="in-phase", robots=robots, localization="truth",
+                     seed=1, duration_s=10.0, dt=0.1, edge_lo=0.0, edge_hi=6.0, bin_m=0.1,
+                     patrol_depth=[0.3] * 60, robot_radius=0.17, min_depth=0.3,
+                     margin_out=0.3)
+
+
 def test_progress_gives_the_agents_newest_common_tick_when_the_worlds_lag(
         tmp_path: Path) -> None:
     """Under load the recorder hears the agents' states far ahead of the world's ticks
@@ -142,11 +150,7 @@ def test_progress_gives_the_agents_newest_common_tick_when_the_worlds_lag(
     phases of the newest tick every robot still publishing has a state of, and its time,
     not nothing. A robot whose states stopped is left out."""
     with recorder_on_bus(tmp_path) as (_, keys, session):
-        info = WorldInfo(map="no-algae", start="in-phase", robots=3, localization="truth",
-                         seed=1, duration_s=10.0, dt=0.1, edge_lo=0.0, edge_hi=6.0, bin_m=0.1,
-                         patrol_depth=[0.3] * 60, robot_radius=0.17, min_depth=0.3,
-                         margin_out=0.3)
-        session.put(keys.world_info(), encode(info))
+        session.put(keys.world_info(), encode(ten_seconds(robots=3)))
         session.put(keys.world_tick(), encode(Tick(0.0, 0, [0, 1, 2])))
         for k in range(31):
             for robot in (0, 1, 2) if k <= 10 else (0, 1):  # robot 2 stops at tick 10
@@ -222,11 +226,7 @@ def test_a_lost_tick_is_gone_past_and_forged_ones_are_refused(tmp_path: Path) ->
     from wire.tickorder import MAX_TICK_GAP
 
     with recorder_on_bus(tmp_path) as (proc, keys, session):
-        info = WorldInfo(map="no-algae", start="in-phase", robots=1, localization="truth",
-                         seed=1, duration_s=10.0, dt=0.1, edge_lo=0.0, edge_hi=6.0, bin_m=0.1,
-                         patrol_depth=[0.3] * 60, robot_radius=0.17, min_depth=0.3,
-                         margin_out=0.3)
-        session.put(keys.world_info(), encode(info))
+        session.put(keys.world_info(), encode(ten_seconds(robots=1)))
 
         def tick(k: int) -> None:
             session.put(keys.world_tick(), encode(Tick(round(k * 0.1, 9), k, [0], done=k == 99)),
