@@ -448,10 +448,13 @@ class AgentNode:
     def run(self) -> None:
         inbox = self.inbox
         while not self.stopping:
-            self.waiting = any(k > self.membership.last_k for k in self.senses)
+            done = max(self.membership.last_k, self.halted_k)
+            self.waiting = any(k > done for k in self.senses)
             if not inbox:
                 deadline = self.membership.deadline
-                timeout = 0.5 if deadline is None else max(0.0, deadline - time.monotonic())
+                # (a deadline with no tick to decide, as after a fault: nothing to wake for)
+                timeout = (0.5 if deadline is None or not self.waiting
+                           else max(0.0, deadline - time.monotonic()))
                 try:
                     self.wake.get(timeout=timeout)
                 except queue.Empty:
