@@ -123,13 +123,18 @@ def free_port(draws: int = 64) -> int:
         return int(s.getsockname()[1])
 
 
+def listening(port: int) -> bool:
+    """Whether something accepts connections on loopback ``port``."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        return s.connect_ex(("127.0.0.1", port)) == 0
+
+
 def wait_listening(port: int, child: Child, timeout_s: float) -> bool:
     """Until ``child`` accepts connections on loopback ``port`` (or has died)."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline and child.alive():
-        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-            if s.connect_ex(("127.0.0.1", port)) == 0:
-                return True
+        if listening(port):
+            return True
         time.sleep(0.05)
     return False
 

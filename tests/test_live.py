@@ -7,7 +7,6 @@ from __future__ import annotations
 import base64
 import json
 import shutil
-import socket
 import struct
 import subprocess
 import sys
@@ -19,6 +18,7 @@ from foxglove_schemas_protobuf.LaserScan_pb2 import LaserScan
 from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
 
+from deploy.procs import listening
 from tests.procutil import end, end_children_of_run, free_port
 
 CLIENT = Path(__file__).parent / "foxglove_client"
@@ -41,11 +41,6 @@ def client_installed():
     return CLIENT / "client.mjs"
 
 
-def _listening(port: int) -> bool:
-    with socket.socket() as s:
-        return s.connect_ex(("127.0.0.1", port)) == 0
-
-
 def _counts(printed: str) -> object:
     """The client's messages per topic, for a failure's message (not its payloads)."""
     try:
@@ -63,7 +58,7 @@ def test_a_foxglove_client_watches_the_team_as_it_runs(client_installed, tmp_pat
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
         deadline = time.monotonic() + 60
-        while not _listening(port):
+        while not listening(port):
             assert sim.poll() is None, sim.communicate()[1][-2000:]
             assert time.monotonic() < deadline, "the live view never listened"
             time.sleep(0.1)

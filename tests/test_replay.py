@@ -5,13 +5,13 @@ new recording's poses are the original's, and no message was lost."""
 from __future__ import annotations
 
 import json
-import socket
 import subprocess
 import sys
 from collections import Counter, defaultdict
 
 from mcap.reader import make_reader
 
+from deploy.procs import listening
 from tests.procutil import end, free_port, member_args, start, unique_ns, wait_for
 
 REPLAYED = ("world/**", "robot/*/sense", "laser/scan")
@@ -35,11 +35,6 @@ def _read(path):
     return counts, poses, ticks
 
 
-def _listening(port: int) -> bool:
-    with socket.socket() as s:
-        return s.connect_ex(("127.0.0.1", port)) == 0
-
-
 def test_a_replayed_pf_run_gives_the_same_poses(pf_run, tmp_path):
     ns, port = unique_ns(), free_port()
     out = tmp_path / "again"
@@ -49,7 +44,7 @@ def test_a_replayed_pf_run_gives_the_same_poses(pf_run, tmp_path):
                           "--listen", f"tcp/127.0.0.1:{port}", "--no-multicast", "--drain",
                           "2"], log=tmp_path / "recorder.log")
         procs.append(recorder)
-        wait_for(lambda: _listening(port), 30, "the recorder's router")
+        wait_for(lambda: listening(port), 30, "the recorder's router")
         # as the run's own localizer (btrack sim gives it the run's seed), with room to
         # wait for a robot's sensing: the lockstep never let it go on without one
         procs.append(start(["localizer", "--robots", "2", "--seed", "3", "--sense-timeout",
@@ -110,7 +105,7 @@ def test_a_replay_at_the_recorded_pace_keeps_the_order(pf_run, tmp_path):
                       "--listen", f"tcp/127.0.0.1:{port}", "--no-multicast", "--drain", "2"],
                      log=tmp_path / "recorder.log")
     try:
-        wait_for(lambda: _listening(port), 30, "the recorder's router")
+        wait_for(lambda: listening(port), 30, "the recorder's router")
         replay = subprocess.run(
             [sys.executable, "-m", "btrack", "replay", str(pf_run), "--speed", "8",
              "--topics", "world/tick", "laser/scan", "agent/*/state",
