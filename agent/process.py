@@ -418,11 +418,15 @@ class AgentNode:
         for old in [k for k in by_tick if k <= done or k < max(by_tick) - HISTORY]:
             del by_tick[old]
 
+    def _done_k(self) -> int:
+        """The last tick done: acted on, stood still on, or given up on for a fault."""
+        return max(self.membership.last_k, self.halted_k)
+
     def _ready_tick(self) -> int | None:
         """The newest tick after the last one done with both its Sense and its Pose."""
         if self.closed and self.ring_edge is None:
             return None  # the contour has not come yet
-        done = max(self.membership.last_k, self.halted_k)
+        done = self._done_k()
         ready = [k for k in self.senses if k > done and k in self.poses]
         if not ready:
             return None
@@ -448,7 +452,7 @@ class AgentNode:
     def run(self) -> None:
         inbox = self.inbox
         while not self.stopping:
-            done = max(self.membership.last_k, self.halted_k)
+            done = self._done_k()
             self.waiting = any(k > done for k in self.senses)
             if not inbox:
                 deadline = self.membership.deadline
@@ -513,9 +517,8 @@ class AgentNode:
         (or one given up on for a fault): a zero command, so the world need not wait for
         us, and no state, so the neighbours keep their segments. Their states of tick k
         then reach us (our subscriptions are in place by now), and at k+1 we claim our
-        share of them.
-        Claiming sooner would take a neighbour not heard yet for the end of the chain
-        and claim the edge up to its end."""
+        share of them. Claiming sooner would take a neighbour not heard yet for the end
+        of the chain and claim the edge up to its end."""
         sense = self.sense
         assert sense is not None
         self.pub_cmd.put(encode(Cmd(t=sense.t, k=k, robot=self.robot, v=0.0, omega=0.0)))

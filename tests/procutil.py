@@ -36,9 +36,13 @@ def member_args(ns: str, port: int) -> list[str]:
             "--listen", "tcp/127.0.0.1:0", "--no-multicast"]
 
 
-def start(args: list[str], log: Path | None = None) -> subprocess.Popen[bytes]:
+def start(args: list[str], log: Path | None = None,
+          code: str | None = None) -> subprocess.Popen[bytes]:
+    """``python -m btrack ARGS``, or ``python -c CODE ARGS`` (code that runs btrack after
+    changing something below a process's boundary, as a test's fault)."""
     err = open(log, "wb") if log else subprocess.DEVNULL  # noqa: SIM115
-    return subprocess.Popen([sys.executable, "-m", "btrack", *args], stdin=subprocess.DEVNULL,
+    how = ["-m", "btrack"] if code is None else ["-c", code]
+    return subprocess.Popen([sys.executable, *how, *args], stdin=subprocess.DEVNULL,
                             stdout=subprocess.PIPE, stderr=err, start_new_session=True)
 
 

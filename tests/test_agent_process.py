@@ -79,13 +79,8 @@ def agent1(bus: tuple[str, int, zenoh.Session], log: Path, neighbours: tuple[int
     session.declare_subscriber(keys.cmd(1), lambda s: cmds.put(decode(Cmd, s.payload.to_bytes())))
     session.liveliness().declare_subscriber(keys.alive(1), lambda s: alive.put(str(s.kind)))
     tokens = [session.liveliness().declare_token(keys.alive(i)) for i in neighbours]
-    args = ["agent", "--id", "1", "--robots", "3", *extra, *member_args(ns, port)]
-    if inject is None:
-        proc = start(args, log)
-    else:
-        proc = subprocess.Popen([sys.executable, "-c", inject, *args], stdin=subprocess.DEVNULL,
-                                stdout=subprocess.PIPE, stderr=open(log, "wb"),  # noqa: SIM115
-                                start_new_session=True)
+    proc = start(["agent", "--id", "1", "--robots", "3", *extra, *member_args(ns, port)], log,
+                 code=inject)
     try:
         alive.get(timeout=30)
         yield proc, keys, states, cmds
