@@ -73,7 +73,7 @@ class RunWriter:
             self._stream.close()
 
 
-RECENT_TICKS = 8  # each robot's states kept, by tick, for progress
+RECENT_TICKS = 8  # each robot's states kept, by tick, for progress: this many and one
 REALTIME_END_SLACK_TICKS = 10
 # The recorder hears the world's ticks and the agents' states on different links, and
 # under load one link can be read seconds behind another: only a tick this far from the
@@ -175,8 +175,8 @@ class Recording:
         elif cls is AgentState:
             recent = self._recent.setdefault(msg.robot, {})
             recent[msg.k] = msg
-            for old in [k for k in recent if k < msg.k - RECENT_TICKS]:
-                del recent[old]
+            if len(recent) > RECENT_TICKS + 1:  # the oldest goes: a state forged for a
+                del recent[min(recent)]  # far tick must not push the real ones out
 
     def _implausible(self, msg: Any) -> str | None:
         """Why a well-formed message cannot be the run's own (agent.plausible for the
@@ -256,13 +256,18 @@ class Recording:
         self.latest = (tick, self._newest_common())
 
     def _newest_common(self) -> dict[int, AgentState]:
-        """The states of the newest tick that every current robot has a state of."""
-        newest = {robot: max(recent) for robot, recent in self._recent.items() if recent}
+        """The states of the newest tick that every current robot has a state of: of the
+        ticks up to the lower median of the robots' newest (one state forged for a tick
+        far ahead, which the window lets in, must not make the others look stopped), the
+        robots with one among the last few of them."""
+        newest = sorted(max(recent) for recent in self._recent.values() if recent)
         if not newest:
             return {}
-        top = max(newest.values())
-        current = [robot for robot, k in newest.items() if k >= top - RECENT_TICKS]
+        top = newest[(len(newest) - 1) // 2]
+        current = [robot for robot, recent in self._recent.items()
+                   if any(top - RECENT_TICKS <= k <= top for k in recent)]
         common = set.intersection(*(set(self._recent[robot]) for robot in current))
+        common = {k for k in common if k <= top}
         if not common:
             return {}
         k = max(common)

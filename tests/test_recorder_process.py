@@ -163,6 +163,13 @@ def test_progress_gives_the_agents_newest_common_tick_when_the_worlds_lag(
         assert progress.t == pytest.approx(0.1) and progress.live == [0, 1, 2]
         assert progress.robots == [0, 1] and progress.states_t == pytest.approx(2.9)
         assert progress.phase == pytest.approx([0.29, 0.39])
+        # a state of robot 0 forged for a tick far ahead (inside the recorder's window):
+        # the others are not taken for stopped, and the forgery is not the picture
+        session.put(keys.state(0), encode(dataclasses.replace(state(500), phase=3.0)))
+        session.put(keys.world_tick(), encode(Tick(0.2, 2, [0, 1, 2])))
+        progress = ask_progress(session, keys, lambda p: p.k == 2)
+        assert progress.robots == [0, 1] and progress.states_t == pytest.approx(2.9)
+        assert progress.phase == pytest.approx([0.29, 0.39])
         session.put(keys.world_tick(), encode(Tick(9.9, 99, [0, 1], done=True)))
 
 
