@@ -221,7 +221,13 @@ def algae_depths(spec: MapSpec, x: np.ndarray, cell_m: float) -> np.ndarray:
     elif spec.algae == "random":
         per_bin = max(1, round(RANDOM_BIN_M / cell_m))
         bins = np.arange(len(x)) // per_bin
-        depth = rng.uniform(0.0, MAX_ALGAE_M, int(bins[-1]) + 1)[bins]
+        levels = rng.uniform(0.0, MAX_ALGAE_M, int(bins[-1]) + 1)
+        if bins[-1] > 0 and 2 * (len(x) - bins[-1] * per_bin) < per_bin:
+            # an edge that ends less than half a column into the last one: that sliver
+            # (a centimetre of 1 m deep algae on an 11.51 m edge) is the column before's,
+            # not a column of its own no pass line lands in
+            levels[-1] = levels[-2]
+        depth = levels[bins]
     else:
         depth = np.zeros_like(x)
     return np.clip(depth, 0.0, MAX_ALGAE_M)

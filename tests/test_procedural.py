@@ -218,6 +218,20 @@ def test_each_algae_kind_has_its_shape() -> None:
     assert (per_bin == per_bin[:, :1]).all() and len(np.unique(per_bin[:, 0])) == 200
 
 
+def test_random_algae_leaves_no_sliver_of_a_column_at_the_edges_end() -> None:
+    """An edge that ends a centimetre into a 0.1 m column: that centimetre is the
+    column before's (no pass line lands in it, and 1 m of algae there was 7 mm^2 of
+    workload no robot could see); one that ends past a column's middle keeps it."""
+    for length, own in ((11.51, False), (11.57, True)):
+        spec = MapSpec(740243, length, "straight", 0.0, "random")
+        x = (np.arange(round(length / 0.01)) + 0.5) * 0.01
+        depth = algae_depths(spec, x, 0.01)
+        last = depth[x > 11.5]
+        assert (last == last[0]).all()
+        assert bool(last[0] != depth[x < 11.5][-1]) is own
+        assert len(np.unique(depth[(x > 11.4) & (x < 11.5)])) == 1
+
+
 def test_curved_edge_peak_is_the_amplitude() -> None:
     x = (np.arange(1500) + 0.5) * 0.01
     for seed in range(10):
