@@ -11,15 +11,24 @@ from dataclasses import dataclass, field
 
 INTERIOR = 0.3  # a pass line within this fraction of a bin from its centre samples it
 SIDE_M = 0.015  # a sample this close to a bin's side may be of the next column
-# The ice edge at a bin: a parabola through the crossings of this many bins either side.
+# The ice edge at a bin: a cubic through the crossings of this many bins either side.
 # A line through +-0.25 m of a curved edge (waves down to 1.5 m long, 0.6 m high) is
-# 3-5 mm off it, one way over a whole bend, and every depth measured there with it;
-# a parabola through +-0.35 m is within 2 mm, and no worse on a straight edge.
+# 3-5 mm off it, one way over a whole bend, and every depth measured there with it. A
+# parabola through +-0.35 m is still up to 9 mm off at a bin's centre on the sharpest
+# bends (the quartic term its window cannot follow), and where a robot's crossings are
+# all on one side of the bin (its segment's ends) it spread too little for one and fell
+# back to a line: on 29 segments of six curved edges, per 0.1 m the edge was 3.0 mm off
+# (rms) and over a segment up to 4.4 mm^2 of workload. A cubic through the same
+# crossings: 1.4 mm and 1.8 mm^2.
 EDGE_POOL_BINS = 3
 KEEP_CROSSINGS = 16  # per bin
 EDGE_FIT_SPREAD_M = 0.02  # crossings spread less than this along the edge: no slope
-EDGE_CURVE_SPREAD_M = 0.1  # and less than this: no curvature (a line)
-EDGE_CURVE_CROSSINGS = 8  # nor with fewer crossings: a parabola through a few follows their noise
+EDGE_CURVE_SPREAD_M = 0.05  # and less than this: no curvature (a line)
+EDGE_CURVE_CROSSINGS = 8  # nor with fewer crossings: a cubic through a few follows their noise
+# nor unless it fits them better than the line by this F ratio: on the same straight and
+# sloped edges the cubic's two more terms took the per-0.1 m error from 0.80 mm (a line)
+# to 0.95 mm; with the test 0.81 mm, and on the curved ones 1.40 mm
+EDGE_CURVE_F = 4.0
 KEEP_POINTS = 16  # depth samples per bin that the workload's profile keeps, with where
 # How much a depth sample is worth: a leg that crossed the algae's end slowly, measured
 # from a well-known ice edge; one that crossed it at full speed (a tick is 5 cm: an
@@ -92,7 +101,7 @@ class DepthMap:
     shared: dict[int, float] = field(default_factory=dict)
     # per bin, the in-legs' crossings of the ice edge: (x, y, weight), WEIGHT's
     crossings: dict[int, list[tuple[float, float, float]]] = field(default_factory=dict)
-    _edges: dict[int, tuple[float, float, float] | None] = field(default_factory=dict)  # fits
+    _edges: dict[int, tuple[float, ...] | None] = field(default_factory=dict)  # fits
     # bin -> its last KEEP_POINTS samples as (s, depth, kind, top_y, t), the kind before
     # a sample near the bin's side is marked SUSPECT (its place is known here); top_y
     # where the algae ended (None: a depth not measured from the edge, the minimum); t
@@ -304,7 +313,7 @@ class DepthMap:
 
     def edge_y(self, s: float) -> float | None:
         """The ice edge at ``s``, None if no in-leg has crossed it near ``s`` yet: the
-        parabola fitted (weighted by kind) through the crossings within EDGE_POOL_BINS
+        cubic fitted (weighted by kind) through the crossings within EDGE_POOL_BINS
         bins, so a sloped or curved edge is not pulled towards its mean, and noise
         averages out over many crossings made at every offset from the ticks."""
         b = self.bin_of(s)
@@ -313,14 +322,17 @@ class DepthMap:
         fit = self._edges[b]
         if fit is None:
             return None
-        at, slope, curve = fit
         u = s - self.centre(b)
-        return at + u * (slope + u * curve)
+        y = 0.0
+        for c in reversed(fit):
+            y = y * u + c
+        return y
 
-    def _fit_edge(self, b: int) -> tuple[float, float, float] | None:
-        """(the edge at bin ``b``'s centre, its slope, half its second derivative) from
-        the crossings near it: weighted least squares, a line or their mean where they
-        spread too little along the edge to tell a curvature or a slope."""
+    def _fit_edge(self, b: int) -> tuple[float, ...] | None:
+        """The edge near bin ``b`` as a polynomial in the offset from the bin's centre
+        (its coefficients, lowest first), from the crossings near it: weighted least
+        squares, a cubic where they spread enough along the edge, a line or their mean
+        where they spread too little to tell a curvature or a slope."""
         seen = [c for k in range(b - EDGE_POOL_BINS, b + EDGE_POOL_BINS + 1)
                 for c in self.crossings.get(k, ())]
         if not seen:
@@ -329,29 +341,29 @@ class DepthMap:
         w = sum(c[2] for c in seen)
         mx = sum(c[2] * (c[0] - centre) for c in seen) / w
         my = sum(c[2] * c[1] for c in seen) / w
-        # moments about the crossings' mean place, where the normal equations are
-        # best conditioned
-        du = [c[0] - centre - mx for c in seen]
-        dy = [c[1] - my for c in seen]
-        ws = [c[2] for c in seen]
-        s2 = sum(wi * u * u for wi, u in zip(ws, du, strict=True)) / w
+        # about the crossings' mean place and in units of their spread, where the
+        # normal equations are best conditioned
+        s2 = sum(c[2] * (c[0] - centre - mx) ** 2 for c in seen) / w
         if s2 < EDGE_FIT_SPREAD_M ** 2:  # all at one place: their mean
-            return my, 0.0, 0.0
-        s3 = sum(wi * u ** 3 for wi, u in zip(ws, du, strict=True)) / w
-        s4 = sum(wi * u ** 4 for wi, u in zip(ws, du, strict=True)) / w
-        t1 = sum(wi * u * v for wi, u, v in zip(ws, du, dy, strict=True)) / w
-        t2 = sum(wi * u * u * v for wi, u, v in zip(ws, du, dy, strict=True)) / w
-        # y - my = a1 u + a2 (u^2 - s2): orthogonal to the constant, so the mean stays
-        det = s2 * (s4 - s2 * s2) - s3 * s3
-        if (s2 < EDGE_CURVE_SPREAD_M ** 2 or len(seen) < EDGE_CURVE_CROSSINGS
-                or det <= 1e-12 * s2 * s4):
-            a1, a2 = t1 / s2, 0.0
-        else:
-            a1 = (t1 * (s4 - s2 * s2) - s3 * t2) / det
-            a2 = (s2 * t2 - s3 * t1) / det
-        # back to the bin's centre: u = v - mx with v the offset from the centre
-        at = my + a1 * (-mx) + a2 * (mx * mx - s2)
-        return at, a1 - 2 * a2 * mx, a2
+            return (my,)
+        scale = math.sqrt(s2)
+        rows = [((c[0] - centre - mx) / scale, c[1] - my, c[2]) for c in seen]
+        coef = _weighted_fit(rows, 1)
+        if coef is None:
+            return (my,)
+        if s2 >= EDGE_CURVE_SPREAD_M ** 2 and len(seen) >= EDGE_CURVE_CROSSINGS:
+            cubic = _weighted_fit(rows, 3)
+            # the cubic where it fits the crossings better than a line by more than
+            # their noise explains (an F test): on a straight or sloped edge the line's
+            # fewer terms follow the noise less
+            if cubic is not None:
+                line_rss, cubic_rss = _rss(rows, coef), _rss(rows, cubic)
+                spare = len(rows) - 4
+                if (line_rss - cubic_rss) / 2 > EDGE_CURVE_F * cubic_rss / spare:
+                    coef = cubic
+        coef[0] += my
+        # back to the bin's centre: y = sum c_j ((v - mx) / scale)^j, v the offset
+        return _shifted(coef, mx, scale)
 
     def learn(self, depths: tuple[tuple[int, float], ...]) -> None:
         """A neighbour's published depths of the bins near its ends."""
@@ -458,8 +470,29 @@ class DepthMap:
         own = sorted((s, self._depth_now(s, d, top), kind)
                      for placed in self.points.values() for s, d, kind, top, _ in placed)
         by_bin: dict[int, list[tuple[float, float]]] = {}  # bin -> (place, smoothed depth)
-        for (p, _, _), v in zip(own, _smoothed(own), strict=True):
-            by_bin.setdefault(self.bin_of(p), []).append((p, v))
+        lone: dict[int, list[tuple[float, float]]] = {}  # bin -> its mixed side samples
+        smoothed = _smoothed(own)
+        for i, ((p, _, _), (v, alone)) in enumerate(zip(own, smoothed, strict=True)):
+            b = self.bin_of(p)
+            offset = p - self.edge_lo - b * self.bin_m
+            # A sample on a bin's side that no sample near it agrees with, off the line
+            # between the samples either side of it, is a leg that wobbled across a
+            # step there: its depth is between the two columns' (one at 0.90 m read
+            # 0.78 m between columns of 0.30 m and 1.28 m, and held 8 mm of its bin:
+            # 4 mm^2). A step that lies there is found by the samples either side of
+            # it; on a steep ramp a sample alone is on that line, and kept.
+            if (alone and min(offset, self.bin_m - offset) < SIDE_M
+                    and 0 < i < len(own) - 1):
+                (pa, _, _), (va, _) = own[i - 1], smoothed[i - 1]
+                (pz, _, _), (vz, _) = own[i + 1], smoothed[i + 1]
+                line = va + (vz - va) * (p - pa) / (pz - pa) if pz > pa else 0.5 * (va + vz)
+                if abs(v - line) > AGREE_M:
+                    lone.setdefault(b, []).append((p, v))
+                    continue
+            by_bin.setdefault(b, []).append((p, v))
+        for b, mixed in lone.items():  # the only samples of their bin: kept
+            if b not in by_bin:
+                by_bin[b] = mixed
         column = {b: sum(v for _, v in rows) / len(rows) for b, rows in by_bin.items()}
         known = sorted(column)
         first = min(known[0], min(self.shared, default=known[0]))
@@ -504,10 +537,11 @@ class DepthMap:
         return starts, integral, values
 
 
-def _smoothed(samples: list[tuple[float, float, int]]) -> list[float]:
+def _smoothed(samples: list[tuple[float, float, int]]) -> list[tuple[float, bool]]:
     """Each sample's depth (samples sorted by place) as the weighted mean of the
     samples within SMOOTH_M of it that agree with it to AGREE_M: noise averages out
-    along a column, a step between columns stays where the samples put it."""
+    along a column, a step between columns stays where the samples put it. With it,
+    whether no other sample there agrees with it (while some other sample is there)."""
     out = []
     lo = 0
     n = len(samples)
@@ -515,13 +549,63 @@ def _smoothed(samples: list[tuple[float, float, int]]) -> list[float]:
         while samples[lo][0] < p - SMOOTH_M:
             lo += 1
         total = weight = 0.0
+        agree = near = 0
         k = lo
         while k < n and samples[k][0] <= p + SMOOTH_M:
             q = samples[k]
+            near += 1
             if abs(q[1] - d) <= AGREE_M:
                 w = WEIGHT[q[2]]
                 total += w * q[1]
                 weight += w
+                agree += 1
             k += 1
-        out.append(total / weight)
+        out.append((total / weight, agree == 1 and near > 1))
     return out
+
+
+def _weighted_fit(rows: list[tuple[float, float, float]], degree: int) -> list[float] | None:
+    """The coefficients (lowest first) of the polynomial of ``degree`` in u that fits
+    the rows (u, y, weight) by weighted least squares; None if they do not fix it (the
+    normal equations singular). Pure Python: the agent imports no numpy."""
+    n = degree + 1
+    moments = [sum(w * u ** j for u, _, w in rows) for j in range(2 * n - 1)]
+    rhs = [sum(w * y * u ** j for u, y, w in rows) for j in range(n)]
+    a = [[moments[i + j] for j in range(n)] + [rhs[i]] for i in range(n)]
+    for col in range(n):  # Gaussian elimination with partial pivoting
+        pivot = max(range(col, n), key=lambda r: abs(a[r][col]))
+        if abs(a[pivot][col]) <= 1e-12 * max(1.0, abs(moments[0])):
+            return None
+        a[col], a[pivot] = a[pivot], a[col]
+        for r in range(col + 1, n):
+            f = a[r][col] / a[col][col]
+            for k in range(col, n + 1):
+                a[r][k] -= f * a[col][k]
+    coef = [0.0] * n
+    for i in range(n - 1, -1, -1):
+        coef[i] = (a[i][n] - sum(a[i][k] * coef[k] for k in range(i + 1, n))) / a[i][i]
+    return coef
+
+
+def _rss(rows: list[tuple[float, float, float]], coef: list[float]) -> float:
+    """The weighted sum of squared residuals of the rows (u, y, weight) off ``coef``."""
+    total = 0.0
+    for u, y, w in rows:
+        fit = 0.0
+        for c in reversed(coef):
+            fit = fit * u + c
+        total += w * (y - fit) ** 2
+    return total
+
+
+def _shifted(coef: list[float], shift: float, scale: float) -> tuple[float, ...]:
+    """The polynomial p((v - shift) / scale) as coefficients in v, lowest first."""
+    out = [0.0] * len(coef)
+    for c in reversed(coef):  # Horner: out = out * t + c, with t = (v - shift) / scale
+        grown = [0.0] * len(coef)
+        for j, x in enumerate(out[:-1]):  # out's degree is below len(coef) - 1 here
+            grown[j] -= x * shift / scale
+            grown[j + 1] += x / scale
+        grown[0] += c
+        out = grown
+    return tuple(out)

@@ -279,6 +279,60 @@ def test_the_ice_edge_is_a_parabola_through_enough_crossings():
         assert dm.edge_y(s) == pytest.approx(bend(s), abs=1e-9)
 
 
+def test_the_ice_edge_follows_a_sharp_bend_to_the_ends_of_a_robots_crossings():
+    """A bend as sharp as the general suite draws (0.3 m high, 1.5 m long), crossed
+    only inside one robot's segment: within a few millimetres up to the segment's ends
+    (a parabola through +-0.35 m was 9 mm off its crest, and near the ends, where
+    every crossing lies on one side, a line through them centimetres off)."""
+    dm = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3)
+    bend = lambda x: 1.0 + 0.3 * math.sin(2 * math.pi * x / 1.5)  # noqa: E731
+    for i in range(160):
+        x = 1.0 + ((i * 0.618034) % 1.0)  # crossings over [1, 2] only, in no order
+        dm.cross(x, bend(x))
+    errors = [abs(dm.edge_y(s) - bend(s)) for s in [1.0 + 0.01 * k for k in range(101)]]
+    assert max(errors) < 0.003
+    assert statistics.mean(errors) < 0.0015
+
+
+def test_a_straight_edge_is_fitted_with_a_line_not_a_cubic_through_the_noise():
+    """Crossings of a sloped straight edge with a few millimetres of noise: a cubic
+    would follow the noise; the F test keeps the line, and the slope."""
+    dm = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3)
+    noise = (0.004, -0.003, 0.005, -0.004, 0.002, -0.005, 0.003, -0.002)
+    xs = [0.3 + 0.05 * k for k in range(9)]
+    for k, x in enumerate(xs):
+        dm.cross(x, 1.0 + 0.1 * x + noise[k % len(noise)])
+    fit = dm._fit_edge(dm.bin_of(0.5))
+    assert fit is not None and len(fit) == 2  # a line
+    assert fit[1] == pytest.approx(0.1, abs=0.02)
+
+
+def test_a_leg_that_wobbled_across_a_step_on_a_bins_side_does_not_set_its_depth():
+    """Columns of 0.36 m and 0.98 m meet on a bin's side (0.5 m). A sample taken right
+    on that side by a leg that drifted across it reads between them; no sample near it
+    agrees, and it is off the line between its neighbours: the profile leaves it out,
+    and both bins come out at their columns' depths."""
+    dm = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3)
+    for x in (0.405, 0.42, 0.44, 0.46, 0.475, 0.4825):
+        dm.record(x, 0.36)
+    for x in (0.503, 0.52, 0.54, 0.56, 0.58):
+        dm.record(x, 0.98)
+    dm.record(0.4999, 0.683)  # mixed
+    assert dm.average(0.4, 0.5) == pytest.approx(0.36, abs=1e-9)
+    assert dm.average(0.5, 0.6) == pytest.approx(0.98, abs=1e-9)
+
+
+def test_a_lone_sample_on_a_bins_side_of_a_steep_ramp_is_kept():
+    """On a ramp of 1.6 m per metre samples 4 cm apart differ by more than agree, but
+    one on a bin's side lies on the line between its neighbours: it is the ramp, kept."""
+    dm = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3)
+    ramp = lambda x: 0.3 + 1.6 * (x - 0.3)  # noqa: E731
+    for x in (0.8625, 0.9005, 0.9375, 0.9625, 0.9875):
+        dm.record(x, ramp(x))
+    with_it = dm.average(0.9, 1.0)
+    assert with_it == pytest.approx(ramp(0.95), abs=0.004)
+
+
 def test_depths_are_measured_again_from_the_edge_the_crossings_give_now():
     """A sample keeps where the algae ended: as crossings come in, the edge its depth
     is measured from gets better, and so does the workload's profile."""
