@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 INTERIOR = 0.3  # a pass line within this fraction of a bin from its centre samples it
@@ -137,6 +138,12 @@ class DepthMap:
         """The middle of bin ``b`` along the edge."""
         return self.edge_lo + (b + 0.5) * self.bin_m
 
+    def on_side(self, s: float) -> bool:
+        """Whether ``s`` is within SIDE_M of its bin's side: a sample there may be of
+        the next column."""
+        offset = s - self.edge_lo - self.bin_of(s) * self.bin_m
+        return min(offset, self.bin_m - offset) < SIDE_M
+
     def record(self, s: float, depth: float, kind: int = PRECISE,
                top_y: float | None = None) -> None:
         """A depth sample at ``s``; ROUGH for one taken at full speed. It counts for
@@ -144,8 +151,7 @@ class DepthMap:
         if ``depth`` was measured from the ice edge (the profile measures it again from
         the edge known then, never below ``default_m``, the patrol's minimum depth)."""
         b = self.bin_of(s)
-        offset = s - self.edge_lo - b * self.bin_m
-        on_side = min(offset, self.bin_m - offset) < SIDE_M
+        on_side = self.on_side(s)
         changed = self._changed(b, s, depth, SUSPECT if on_side else kind)
         placed = self.points.setdefault(b, [])
         if changed:
@@ -270,8 +276,7 @@ class DepthMap:
         right: tuple[float, float] | None = None
         for k in (b - 1, b, b + 1):
             for q, d, _, top, _ in reversed(self.points.get(k, ())):
-                offset = q - self.edge_lo - k * self.bin_m
-                if min(offset, self.bin_m - offset) < SIDE_M or abs(q - s) > BRACKET_M:
+                if self.on_side(q) or abs(q - s) > BRACKET_M:
                     continue
                 # from the edge as the crossings give it now, as the new sample is: the
                 # edge a sample was first measured from may have been centimetres off
@@ -322,11 +327,7 @@ class DepthMap:
         fit = self._edges[b]
         if fit is None:
             return None
-        u = s - self.centre(b)
-        y = 0.0
-        for c in reversed(fit):
-            y = y * u + c
-        return y
+        return _poly_at(fit, s - self.centre(b))
 
     def _fit_edge(self, b: int) -> tuple[float, ...] | None:
         """The edge near bin ``b`` as a polynomial in the offset from the bin's centre
@@ -474,15 +475,13 @@ class DepthMap:
         smoothed = _smoothed(own)
         for i, ((p, _, _), (v, alone)) in enumerate(zip(own, smoothed, strict=True)):
             b = self.bin_of(p)
-            offset = p - self.edge_lo - b * self.bin_m
             # A sample on a bin's side that no sample near it agrees with, off the line
             # between the samples either side of it, is a leg that wobbled across a
             # step there: its depth is between the two columns' (one at 0.90 m read
             # 0.78 m between columns of 0.30 m and 1.28 m, and held 8 mm of its bin:
             # 4 mm^2). A step that lies there is found by the samples either side of
             # it; on a steep ramp a sample alone is on that line, and kept.
-            if (alone and min(offset, self.bin_m - offset) < SIDE_M
-                    and 0 < i < len(own) - 1):
+            if alone and 0 < i < len(own) - 1 and self.on_side(p):
                 (pa, _, _), (va, _) = own[i - 1], smoothed[i - 1]
                 (pz, _, _), (vz, _) = own[i + 1], smoothed[i + 1]
                 line = va + (vz - va) * (p - pa) / (pz - pa) if pz > pa else 0.5 * (va + vz)
@@ -589,13 +588,15 @@ def _weighted_fit(rows: list[tuple[float, float, float]], degree: int) -> list[f
 
 def _rss(rows: list[tuple[float, float, float]], coef: list[float]) -> float:
     """The weighted sum of squared residuals of the rows (u, y, weight) off ``coef``."""
-    total = 0.0
-    for u, y, w in rows:
-        fit = 0.0
-        for c in reversed(coef):
-            fit = fit * u + c
-        total += w * (y - fit) ** 2
-    return total
+    return sum(w * (y - _poly_at(coef, u)) ** 2 for u, y, w in rows)
+
+
+def _poly_at(coef: Sequence[float], u: float) -> float:
+    """The polynomial of coefficients ``coef`` (lowest first) at ``u`` (Horner)."""
+    y = 0.0
+    for c in reversed(coef):
+        y = y * u + c
+    return y
 
 
 def _shifted(coef: list[float], shift: float, scale: float) -> tuple[float, ...]:
