@@ -324,7 +324,8 @@ class Controller:
             time_left = wrap_pi(middle - lead - self.phase_des) / rate
             fast, slow = p.to_go(y, self.lo, self.hi, self.hurry)
             return leg_speed(time_left, fast, slow, steer.measuring, lim.v_max,
-                             p.config.measure_speed, p.config.min_leg_speed)
+                             p.config.measure_speed, p.config.min_leg_speed,
+                             p.config.fine_speed)
         if view.turned > p.config.arc_begun_rad:
             return self._arc_speed(steer, dt)
         if self.hurry or arc_may_begin(

@@ -96,6 +96,10 @@ class PatrolConfig:
     edge_zone_m: float = 0.08  # slow down this close before a known edge (ice, algae out)
     turn_margin_m: float = 0.05  # turn under the ice this far past the next pass's algae
     min_leg_speed: float = 0.025  # m/s: legs are paced to the team, never slower than this
+    # A leg with time to spare measures slower than ``measure_speed``, down to this
+    # (m/s; 0: never), its fast parts then reckoned at 0.8 v_max (agent.phase.leg_speed):
+    # 2.5 mm of depth per 10 Hz tick instead of 1 cm where the team's rate allows it.
+    fine_speed: float = 0.025
     # Every in-leg goes on to the segment's deepest known depth before it turns, so all
     # of a robot's passes are as long and its path-length phase runs as its position
     # phase does; it costs distance, not time (the team's rate is set by the deepest
@@ -149,6 +153,8 @@ class PatrolConfig:
             raise ValueError("depths, margin, search distance and bin must be positive")
         if self.measure_zone_m < 0 or self.measure_speed <= 0:
             raise ValueError("measure_zone_m must be >= 0 and measure_speed positive")
+        if not 0 <= self.fine_speed <= self.measure_speed:
+            raise ValueError("fine_speed must be in [0, measure_speed] (0: never)")
         if self.edge_zone_m < 0 or self.turn_margin_m < 0:
             raise ValueError("edge_zone_m and turn_margin_m must be >= 0")
         if not 0 <= self.aim_fraction <= 0.5:

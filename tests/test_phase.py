@@ -125,6 +125,32 @@ def test_a_leg_is_paced_to_end_when_its_arc_is_due():
     assert leg_speed(1000.0, 0.1, 0.0, False, v_max, slow, floor) == floor
 
 
+def test_time_to_spare_goes_to_measuring_down_to_the_fine_speed():
+    v_max, slow, floor, fine = 0.5, 0.1, 0.025, 0.025
+    # 20 s for 1 m fast and 0.2 m to measure: the measuring at the fine speed (8 s),
+    # the fast metre in the 12 s left
+    assert leg_speed(20.0, 1.0, 0.2, True, v_max, slow, floor, fine) == pytest.approx(fine)
+    assert leg_speed(20.0, 1.0, 0.2, False, v_max, slow, floor, fine) == pytest.approx(1 / 12)
+    # 6 s: 2 s for the fast part at 0.8 v_max, the 4 s left to measure the 0.2 m in
+    assert leg_speed(6.0, 0.8, 0.2, True, v_max, slow, floor, fine) == pytest.approx(0.05)
+    assert leg_speed(6.0, 0.8, 0.2, False, v_max, slow, floor, fine) == pytest.approx(0.4)
+    # no time to spare: the measuring speed, as without it
+    assert leg_speed(4.0, 0.8, 0.2, False, v_max, slow, floor, fine) == pytest.approx(0.4)
+    assert leg_speed(4.0, 0.8, 0.2, True, v_max, slow, floor, fine) == slow
+    # nothing to measure left: the fine speed changes nothing
+    assert leg_speed(4.0, 1.0, 0.0, False, v_max, slow, floor, fine) == pytest.approx(0.25)
+
+
+@given(st.floats(0, 100), st.floats(0, 10), st.floats(0.001, 10))
+def test_measuring_finely_never_makes_a_leg_that_had_time_late(left, fast, slow_m):
+    v_max, slow, floor, fine = 0.5, 0.1, 0.025, 0.025
+    v_fast = leg_speed(left, fast, slow_m, False, v_max, slow, floor, fine)
+    v_slow = leg_speed(left, fast, slow_m, True, v_max, slow, floor, fine)
+    assert fine <= v_slow <= slow and floor <= v_fast <= v_max
+    if left >= fast / (0.8 * v_max) + slow_m / slow:  # on time at the measuring speed
+        assert fast / v_fast + slow_m / v_slow <= left * (1 + 1e-9) + 1e-9
+
+
 @given(st.floats(-100, 100), st.floats(0, 10), st.floats(0, 10), st.booleans())
 def test_leg_speed_stays_within_the_robot_and_the_measuring_limits(left, fast, slow_m, measuring):
     v = leg_speed(left, fast, slow_m, measuring, 0.5, 0.1, 0.025)
