@@ -97,9 +97,11 @@ class PatrolConfig:
     turn_margin_m: float = 0.05  # turn under the ice this far past the next pass's algae
     min_leg_speed: float = 0.025  # m/s: legs are paced to the team, never slower than this
     # A leg with time to spare measures slower than ``measure_speed``, down to this
-    # (m/s; 0: never), its fast parts then reckoned at 0.8 v_max (agent.phase.leg_speed):
-    # 2.5 mm of depth per 10 Hz tick instead of 1 cm where the team's rate allows it.
-    fine_speed: float = 0.025
+    # (m/s; 0: never), its fast parts then reckoned at 0.8 v_max (agent.phase.leg_speed).
+    # Off by default: on 10 general-suite cases (seed 5) 0.025 m/s lowered the relative
+    # workload error on 6 but raised the position phase on all 10 and the believed-
+    # workload gap on the two longest segments (docs/choices.md).
+    fine_speed: float = 0.0
     # Every in-leg goes on to the segment's deepest known depth before it turns, so all
     # of a robot's passes are as long and its path-length phase runs as its position
     # phase does; it costs distance, not time (the team's rate is set by the deepest
