@@ -353,7 +353,7 @@ class Patrol:
         self.line_x = self._aim(line, lo, hi)
         # Heading +y, going +x is a right (clockwise) turn; heading -y it is a left one.
         self.arc = Arc(-direction if heading_in else direction,
-                       self._arc_radius(abs(line - self.x)))
+                       self._arc_radius(abs(self.line_x - self.x)))
 
     def _first_pass(self, lo: float, hi: float, step: float, heading_in: bool,
                     direction: int, clock: float | None) -> float:

@@ -739,3 +739,36 @@ def test_a_sample_measured_from_a_better_edge_does_not_look_like_a_change():
         dm.record(0.552 + 0.001 * k, 1.0, top_y=1.0)  # 1.0 from it, the same algae
         dm.tick(0.1, 100.0)
     assert dm.contradicted is None and not dm.changing
+
+
+def test_an_aimed_leg_begins_on_the_line_it_is_aimed_at():
+    """The arc onto a leg aimed off its grid line (a new column, a step) is sized for
+    the aimed line, so the leg starts on it: sized for the grid line, an out-leg that
+    turned under the ice was still 2 cm off when it met the algae's end, and recorded
+    its sample there instead of on the step it was aimed at."""
+    gmap = load_map("random-algae", 0.05, 1)
+    world = World(gmap, 2, "in-phase", seed=1)
+    info = world.info()
+    e0, e1 = info["edge_lo"], info["edge_hi"]
+    ctrls = [Controller(i, *initial_segment(i, 2, e0, e1), e0, e1, world.truth(i)[0])
+             for i in range(2)]
+    published: list[Neighbour | None] = [None, None]
+    arcs = (Motion.TURN_OUT, Motion.TURN_UNDER)
+    was = [c.patrol.motion for c in ctrls]
+    starts = []  # (how far the leg's first tick is from its line, how far it was aimed)
+    for _ in range(3000):
+        outs = []
+        for i, c in enumerate(ctrls):
+            r = world.sense(i)
+            x, y, th = world.truth(i)
+            outs.append(c.step(0.1, x, y, th, r.ice, r.algae, published[1 - i] if i else None,
+                               None if i else published[1], i > 0, i < 1))
+            p = c.patrol
+            if was[i] in arcs and p.motion not in arcs:
+                starts.append((abs(x - p.line_x), abs(p.line_x - p.grid_x)))
+            was[i] = p.motion
+        published = [c.published for c in ctrls]
+        world.step({i: (o.v, o.omega) for i, o in enumerate(outs)}, 0.1)
+    aimed = [off for off, by in starts if by > 0.02]
+    assert len(aimed) >= 5, starts
+    assert max(aimed) < 0.01, sorted(aimed)
