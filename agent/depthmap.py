@@ -41,6 +41,7 @@ SUSPECT, ROUGH, PRECISE = 0, 1, 2
 WEIGHT = {PRECISE: 25.0, ROUGH: 1.0, SUSPECT: 1.0}
 SMOOTH_M = 0.05  # a depth sample is averaged with the samples this close to it
 AGREE_M = 0.05  # that measured within this of it (across a step they differ more)
+SPIKE_SPAN_M = 0.1  # a lone sample between two this close may be a stray (``_profile``)
 # The algae may change while the team patrols (issue 18). A sample that contradicts
 # what earlier samples near it say (``_expected_at``: one at its place, or two either
 # side that agree) by more than STALE_M (twice a tick at full speed, 5 cm, and the
@@ -62,6 +63,15 @@ SAME_PLACE_M = 0.01  # samples this close measured the same column: a slope move
 BRACKET_M = 0.03  # else samples this close either side, if they agree, say what it should be
 KEEP_POINTS_CHANGING = 3
 QUIET_CYCLES = 2.0  # no such sample for this many cycles: the change is over, keep more
+# A step of the algae between two neighbouring samples of the profile that disagree
+# (by more than AGREE_M) is placed at the middle between them: it costs up to half
+# their distance times its rise of workload (a 1 m step between samples 4 cm apart,
+# 0.02 m^2). ``step_target`` says where a leg's sample would take most of that off; a
+# stretch narrower than RESOLVE_M is placed well enough (a 1 m step, 2.5 mm^2), and no
+# leg is aimed within AIM_SIDE_M of a bin's side, where a leg that wobbles reads the
+# next column as often as its own.
+RESOLVE_M = 0.005
+AIM_SIDE_M = 0.005
 
 
 @dataclass
@@ -113,6 +123,10 @@ class DepthMap:
     # the profile ``average`` integrates, built for one version: (version, where each
     # piece starts, the integral up to there, each piece's depth)
     _integral: tuple[int, list[float], list[float], list[float]] = (-1, [], [], [])
+    # the profile's steps of that version, by place: (a, z, depth at a, depth at z) for
+    # each two neighbouring samples it keeps that disagree by more than AGREE_M, on
+    # level ground either side (``_steps``)
+    _steps: list[tuple[float, float, float, float]] = field(default_factory=list)
     _learned: tuple[object, object] = (None, None)  # the last two tuples learned
     _ends: tuple[object, tuple[tuple[int, float], ...]] = (None, ())  # near_ends's, by key
     # the last sample that contradicted an earlier one at its place: (the sign of the
@@ -480,8 +494,14 @@ class DepthMap:
             # step there: its depth is between the two columns' (one at 0.90 m read
             # 0.78 m between columns of 0.30 m and 1.28 m, and held 8 mm of its bin:
             # 4 mm^2). A step that lies there is found by the samples either side of
-            # it; on a steep ramp a sample alone is on that line, and kept.
-            if alone and 0 < i < len(own) - 1 and self.on_side(p):
+            # it; on a steep ramp a sample alone is on that line, and kept. The same
+            # test holds for a lone sample anywhere whose neighbours either side are
+            # closer than SPIKE_SPAN_M: a column that narrow is rare, a sample from a
+            # leg still converging onto its line after an arc or one taken while the
+            # segment moved is not (on a 30 m steps map three such, 8-31 cm off, held
+            # 0.01 m^2 for 4000 s).
+            if alone and 0 < i < len(own) - 1 and (
+                    self.on_side(p) or own[i + 1][0] - own[i - 1][0] < SPIKE_SPAN_M):
                 (pa, _, _), (va, _) = own[i - 1], smoothed[i - 1]
                 (pz, _, _), (vz, _) = own[i + 1], smoothed[i + 1]
                 line = va + (vz - va) * (p - pa) / (pz - pa) if pz > pa else 0.5 * (va + vz)
@@ -493,6 +513,9 @@ class DepthMap:
             if b not in by_bin:
                 by_bin[b] = mixed
         column = {b: sum(v for _, v in rows) / len(rows) for b, rows in by_bin.items()}
+        kept = sorted(row for b, rows in by_bin.items() for row in rows
+                      if not (self.kind.get(b) == SUSPECT and b in self.shared))
+        self._steps = _steps(kept)
         known = sorted(column)
         first = min(known[0], min(self.shared, default=known[0]))
         last = max(known[-1], max(self.shared, default=known[-1]))
@@ -534,6 +557,68 @@ class DepthMap:
             integral.append(integral[-1] + values[k - 1] * (starts[k] - starts[k - 1]))
         self._integral = (self.version, starts, integral, values)
         return starts, integral, values
+
+
+    def steps(self) -> list[tuple[float, float, float, float]]:
+        """The profile's steps (``_steps``): (a, z, depth at a, depth at z), by a."""
+        if self.depths:
+            self._profile()
+        return self._steps
+
+    def step_target(self, lo: float, hi: float) -> float | None:
+        """Where in [lo, hi] a leg would best place a step of the profile: of the
+        stretches between two samples that disagree, the middle of a stretch's part in
+        [lo, hi] (moved off a bin's side by AIM_SIDE_M) where a sample takes the most
+        workload error off; None if no stretch there is still RESOLVE_M wide about
+        such a place."""
+        best, best_score = None, 0.0
+        for a, z, va, vz in self.steps():
+            if z <= lo or a >= hi:
+                continue
+            aim = self._off_side(0.5 * (max(a, lo) + min(z, hi)))
+            if not (min(aim - a, z - aim) > 0.5 * RESOLVE_M and lo <= aim <= hi):
+                continue
+            # the workload error a sample at ``aim`` takes off, expected over where in
+            # (a, z) the step may be: rise * (aim - a) * (z - aim) / (z - a)
+            score = abs(vz - va) * (aim - a) * (z - aim) / (z - a)
+            if score > best_score:
+                best, best_score = aim, score
+        return best
+
+    def _off_side(self, s: float) -> float:
+        """``s``, or AIM_SIDE_M off its bin's side if it is nearer to it than that."""
+        side = self.edge_lo + round((s - self.edge_lo) / self.bin_m) * self.bin_m
+        if abs(s - side) >= AIM_SIDE_M:
+            return s
+        return side + AIM_SIDE_M if s >= side else side - AIM_SIDE_M
+
+    def expected_depths(self, s: float) -> tuple[float, ...]:
+        """The depths a leg at ``s`` may find the algae end at: none if its bin has no
+        depth yet; both sides' of a step of the profile not yet placed to RESOLVE_M
+        about ``s``; else the bin's depth."""
+        depth = self.depths.get(self.bin_of(s))
+        if depth is None:
+            return ()
+        steps = self.steps()
+        j = bisect.bisect_right(steps, (s, math.inf)) - 1
+        if j >= 0:
+            a, z, va, vz = steps[j]
+            if a < s < z and z - a > RESOLVE_M:
+                return (va, vz)
+        return (depth,)
+
+
+def _steps(kept: list[tuple[float, float]]) -> list[tuple[float, float, float, float]]:
+    """The steps among samples (place, depth) sorted by place: two neighbours that
+    disagree by more than AGREE_M, each agreeing with its own other neighbour (if it
+    has one). On a ramp steep enough that neighbours disagree, their neighbours do too:
+    a ramp is no step, and a sample between its two is on it already."""
+    def agree(i: int, j: int) -> bool:
+        return not 0 <= j < len(kept) or abs(kept[i][1] - kept[j][1]) <= AGREE_M
+
+    return [(pa, pz, va, vz) for i, ((pa, va), (pz, vz)) in enumerate(zip(kept, kept[1:],
+                                                                          strict=False))
+            if abs(vz - va) > AGREE_M and agree(i, i - 1) and agree(i + 1, i + 2)]
 
 
 def _smoothed(samples: list[tuple[float, float, int]]) -> list[tuple[float, bool]]:

@@ -117,6 +117,11 @@ class PatrolConfig:
     # Legs never further apart than this, aimed or not: a point of the edge between two
     # is then within a robot's radius (0.17 m) of one of them, seen every sweep.
     cover_m: float = 0.34
+    # A leg with no new column in reach moves onto a step of its depth map's profile
+    # not yet placed to 5 mm (``DepthMap.step_target``), as far as ``aim_fraction`` and
+    # ``cover_m`` let it: on a long segment a step is otherwise placed only as the
+    # grid's offsets happen to fall near it, a centimetre or two after 20 sweeps.
+    aim_steps: bool = True
     # An arc that has turned a quarter ends once its heading is within this of the
     # leg's (or past it), rad: at 10 Hz a tight arc turns a third of a radian a tick.
     arc_end_rad: float = 0.03
@@ -425,9 +430,10 @@ class Patrol:
         """Where the leg of grid line ``line`` runs: on it, unless the middle of a
         column with no depth measured (``DepthMap.known``) lies within ``aim_fraction``
         of a pass of it and inside the segment, and the line is not in such a middle
-        already; then on the nearest such middle. Never more than ``cover_m`` from the
-        last leg (the arc from it begins now), nor so far back that the next line of the
-        grid would be."""
+        already; then on the nearest such middle. With no such column, on the place
+        within that reach where a sample best places a step of the profile
+        (``aim_steps``). Never more than ``cover_m`` from the last leg (the arc from it
+        begins now), nor so far back that the next line of the grid would be."""
         c, depth_map = self.config, self.depth_map
         step = self.spacing(lo, hi)
         reach = c.aim_fraction * step
@@ -442,6 +448,10 @@ class Patrol:
             if (not depth_map.known(b) and inside_lo <= centre <= inside_hi
                     and (best == line or abs(centre - line) < abs(best - line))):
                 best = centre
+        if best == line and c.aim_steps:  # no new column: a step to place?
+            target = depth_map.step_target(inside_lo, inside_hi)
+            if target is not None:
+                best = target
         return best
 
     def _turn_depth(self, lo: float, hi: float, depth: float, clock: float | None) -> float:
@@ -516,14 +526,13 @@ class Patrol:
         else:
             return 0.0, 0.0
         if self.motion in IN_LEG and leg.turn_depth is None:
-            if known is None:  # a new column: all its depth slowly
+            expected_here = dm.expected_depths(self.x)
+            if not expected_here:  # a new column: all its depth slowly
                 zones.append((base, base + turn))
-            else:
-                zones.append((base + known - c.measure_zone_m, base + known))
+            for d in expected_here:  # (both depths of a step not yet placed)
+                zones.append((base + d - c.measure_zone_m, base + d))
         a, z = min(y, end), max(y, end)
-        slow = 0.0 if hurry else sum(max(0.0, min(z, top) - max(a, bottom))
-                                     for bottom, top in zones)
-        slow = min(slow, z - a)
+        slow = 0.0 if hurry else _covered(zones, a, z)
         return z - a - slow, slow
 
     def arc_time_s(self, lo: float, hi: float, v_max: float, wheel_base_m: float) -> float:
@@ -808,9 +817,10 @@ class Patrol:
         """Whether this leg is about to cross an edge it measures, so goes slowly: on
         the way in, the ice edge where the in-legs found it (from ``edge_zone_m`` before
         it); under the ice, near where the depth map expects the algae to end, or
-        anywhere if the map has no depth for this column yet; on the way out, the
-        algae's end where the map expects it (from ``edge_zone_m`` before it), if the
-        leg began below it. Never while the robot hurries to catch up with the team."""
+        anywhere if the map has no depth for this column yet (near both depths of a
+        step it has not placed yet); on the way out, the algae's end where the map
+        expects it (from ``edge_zone_m`` before it), if the leg began below it. Never
+        while the robot hurries to catch up with the team."""
         c, leg, out = self.config, self.in_leg, self.out_leg
         if hurry:
             return False
@@ -826,5 +836,16 @@ class Patrol:
                     and -c.past_edge_m < y - edge - expected < c.edge_zone_m)
         if self.motion is not Motion.UNDER or leg.entry_y is None or leg.turn_depth is not None:
             return False
-        expected = self.depth_map.depths.get(self.depth_map.bin_of(x))
-        return expected is None or abs(y - leg.entry_y - expected) < c.measure_zone_m
+        depths = self.depth_map.expected_depths(x)
+        return not depths or any(abs(y - leg.entry_y - d) < c.measure_zone_m for d in depths)
+
+
+def _covered(zones: list[tuple[float, float]], a: float, z: float) -> float:
+    """How much of [a, z] the zones (bottom, top) cover, overlaps counted once."""
+    covered, reach = 0.0, a
+    for bottom, top in sorted(zones):
+        lo, hi = max(bottom, reach), min(top, z)
+        if hi > lo:
+            covered += hi - lo
+            reach = hi
+    return covered

@@ -322,6 +322,23 @@ def test_a_leg_that_wobbled_across_a_step_on_a_bins_side_does_not_set_its_depth(
     assert dm.average(0.5, 0.6) == pytest.approx(0.98, abs=1e-9)
 
 
+def test_a_lone_stray_sample_between_close_neighbours_is_left_out():
+    """A sample 31 cm off the samples 2 cm either side of it, mid-bin (a leg still
+    converging onto its line after an arc, on the next column's depth): no column
+    that narrow is likely, so the profile leaves it out while its bin has other
+    samples; alone in its bin it still counts."""
+    dm = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3)
+    for x in (0.42, 0.435, 0.465, 0.48):
+        dm.record(x, 0.5)
+    dm.record(0.45, 0.81)  # the stray
+    assert dm.average(0.4, 0.5) == pytest.approx(0.5, abs=1e-9)
+    assert not dm.steps()
+    alone = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3)
+    for x, d in ((0.36, 0.5), (0.45, 0.81), (0.54, 0.5)):
+        alone.record(x, d)
+    assert alone.average(0.4, 0.5) > 0.7
+
+
 def test_a_lone_sample_on_a_bins_side_of_a_steep_ramp_is_kept():
     """On a ramp of 1.6 m per metre samples 4 cm apart differ by more than agree, but
     one on a bin's side lies on the line between its neighbours: it is the ramp, kept."""
@@ -739,6 +756,88 @@ def test_a_sample_measured_from_a_better_edge_does_not_look_like_a_change():
         dm.record(0.552 + 0.001 * k, 1.0, top_y=1.0)  # 1.0 from it, the same algae
         dm.tick(0.1, 100.0)
     assert dm.contradicted is None and not dm.changing
+
+
+def test_the_widest_step_not_yet_placed_is_the_one_a_leg_is_aimed_at():
+    """Two steps between samples that disagree: 0.4 m to 1.0 m between 0.13 and 0.16
+    (3 cm x 0.6 m) and 1.0 m to 0.3 m between 0.25 and 0.355 (10.5 cm x 0.7 m). The leg
+    goes where a sample takes the most error off (rise x (aim - a)(z - aim) / width): the
+    middle of a stretch, or of its part inside the window; off a bin's side by
+    AIM_SIDE_M; and nowhere once a stretch is under RESOLVE_M."""
+    dm = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3)
+    for s, d in ((0.02, 0.4), (0.08, 0.4), (0.13, 0.4), (0.16, 1.0), (0.25, 1.0),
+                 (0.355, 0.3), (0.45, 0.3)):
+        dm.record(s, d, PRECISE)
+    assert [(a, z) for a, z, _, _ in dm.steps()] == [(0.13, 0.16), (0.25, 0.355)]
+    assert dm.step_target(0.0, 0.5) == pytest.approx(0.305)  # 0.3025: 0.30 is a bin's side
+    assert dm.step_target(0.0, 0.26) == pytest.approx(0.145)  # the wide one's 1 cm: less
+    assert dm.step_target(0.0, 0.27) == pytest.approx(0.26)  # its 2 cm: more
+    assert dm.step_target(0.31, 0.5) == pytest.approx(0.3325)  # its part in [0.31, 0.5]
+    assert dm.step_target(0.0, 0.1) is None and dm.step_target(0.5, 0.9) is None
+    assert dm.expected_depths(0.15) == (0.4, 1.0)  # either side of the open step
+    assert dm.expected_depths(0.2) == (1.0,)  # the bin's own
+    assert dm.expected_depths(0.75) == ()  # no depth there yet
+    dm.record(0.143, 0.4, PRECISE)
+    dm.record(0.147, 1.0, PRECISE)  # 0.143 to 0.147: placed to 4 mm
+    assert dm.step_target(0.1, 0.2) is None
+    assert dm.expected_depths(0.145) == (dm.depths[1],)  # placed: the bin's depth
+
+
+def test_a_ramp_whose_samples_disagree_is_no_step_to_aim_at():
+    """On a ramp of 1.6 m per metre samples 4 cm apart disagree, each with both its
+    neighbours: no step (a leg aimed between two would only sample the ramp again),
+    and a leg there expects one depth, not two."""
+    dm = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3)
+    for k in range(12):
+        x = 0.305 + 0.04 * k
+        dm.record(x, 0.3 + 1.6 * (x - 0.3), PRECISE)
+    assert dm.steps() == [] and dm.step_target(0.3, 0.8) is None
+    assert len(dm.expected_depths(0.52)) == 1
+
+
+def test_a_leg_with_no_new_column_in_reach_is_aimed_at_a_step_within_aim_fraction():
+    """With every column measured, a pass line moves onto a step of the profile that
+    is not yet placed, by at most aim_fraction of a pass (and within cover_m); with
+    aim_steps off it stays on its line."""
+    cfg = PatrolConfig()
+    dm = DepthMap(0.0, 0.1, cfg.min_depth_m)
+    for b in range(100):
+        dm.record(0.1 * b + 0.05, 0.5 if b < 50 else 1.2)  # a step between 4.95 and 5.05
+    patrol = Patrol(cfg, dm, x=4.9)
+    patrol.passes = 40  # 0.25 m apart
+
+    def aim(line: float) -> float:
+        patrol.arc_from_x = line - 0.25
+        return patrol._aim(line, 0.0, 10.0)
+
+    reach = cfg.aim_fraction * 0.25  # 6.25 cm
+    assert aim(5.08) == pytest.approx(0.5 * (5.08 - reach + 5.05))  # its part in reach
+    assert aim(4.91) == pytest.approx(0.5 * (4.95 + 4.91 + reach))
+    assert aim(5.003) == pytest.approx(5.005)  # off the bin's side at 5.0
+    assert aim(4.96) == pytest.approx(0.5 * (4.95 + 4.96 + reach))
+    assert aim(5.05 + reach + 0.001) == 5.05 + reach + 0.001  # out of reach
+    assert aim(2.0) == 2.0  # no step near
+    patrol.config = PatrolConfig(aim_steps=False)
+    assert aim(5.08) == 5.08
+
+
+def test_a_leg_on_a_step_not_yet_placed_measures_slowly_near_both_its_depths():
+    """Under the ice on a step between 0.4 m and 1.0 m that its samples do not yet
+    place, the leg goes slowly near either depth, and to_go counts both zones once."""
+    cfg = PatrolConfig()
+    dm = DepthMap(0.0, 0.1, cfg.min_depth_m)
+    for s, d in ((0.11, 0.4), (0.19, 1.0), (0.55, 1.0)):  # (the last: legs go to 1.0)
+        dm.record(s, d, PRECISE)
+    dm.cross(0.15, 0.0)
+    patrol = Patrol(cfg, dm, x=0.15)
+    patrol.motion, patrol.in_leg = Motion.UNDER, InLeg(entry_y=0.0, from_water=True)
+    patrol.x = 0.15
+    slow = [patrol._measuring(0.15, y, False) for y in (0.2, 0.4, 0.7, 1.0, 1.2)]
+    assert slow == [False, True, False, True, False]
+    fast, slow_m = patrol.to_go(0.0, 0.0, 2.0)
+    assert slow_m == pytest.approx(2 * cfg.measure_zone_m)
+    patrol.x = 0.12  # a bin's own depth, 0.4 m... of the step's left side
+    assert patrol._measuring(0.12, 1.0, False) is True  # still inside the open step
 
 
 def test_an_aimed_leg_begins_on_the_line_it_is_aimed_at():
