@@ -155,7 +155,7 @@ class Controller:
         self.lo, self.hi = lo, hi
         if ring_length is None:  # its bins as the listeners of its states count them
             self.depth_map = DepthMap(edge_lo, cfg.bin_m, cfg.min_depth_m,
-                                      bins=edge_bins(edge_lo, edge_hi, cfg.bin_m))
+                                      bins=edge_bins(edge_lo, edge_hi, cfg.bin_m), edge_hi=edge_hi)
         else:
             self.depth_map = DepthMap(0.0, ring_bins(ring_length, cfg.bin_m), cfg.min_depth_m)
         self.patrol = Patrol(cfg, self.depth_map, x, direction=1)

@@ -417,6 +417,22 @@ def test_a_bin_off_the_edge_is_never_told_to_the_neighbours():
     assert ctrl.depth_map.bins == edge_bins(0.0, 6.0, ctrl.depth_map.bin_m)
 
 
+def test_a_sample_past_the_edges_end_is_not_in_the_workload():
+    """A leg that strays past the edge's end (a 24.01 m edge, 0.7 mm past it) leaves
+    the ice sideways and reads the algae ending there: the edge's last centimetre is
+    as deep as the samples inside say, not as that one."""
+    from agent.plausible import edge_bins
+
+    dm = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3, bins=edge_bins(0.0, 24.01, 0.1),
+                  edge_hi=24.01)
+    for s, d in ((23.95, 0.94), (23.99, 0.94), (24.0107, 0.56)):
+        dm.record(s, d)
+    assert dm.average(24.0, 24.01) == pytest.approx(0.94)
+    assert dm.depths[240] == 0.56  # the bin keeps it, for the robot's own planning
+    ctrl = Controller(0, 0.0, 2.0, 0.0, 6.0, 0.5)
+    assert ctrl.depth_map.edge_hi == 6.0
+
+
 def test_a_gap_in_the_profile_matters_only_between_different_depths():
     dm = DepthMap(edge_lo=0.0, bin_m=0.1, default_m=0.3)
     for b in range(10):
