@@ -524,7 +524,7 @@ class DepthMap:
                 by_bin[b] = mixed
         column = {b: sum(v for _, v in rows) / len(rows) for b, rows in by_bin.items()}
         kept = sorted(row for b, rows in by_bin.items() for row in rows
-                      if not (self.kind.get(b) == SUSPECT and b in self.shared))
+                      if not self._sides_only(b))
         self._steps = _steps(kept)
         known = sorted(column)
         first = min(known[0], min(self.shared, default=known[0]))
@@ -537,8 +537,8 @@ class DepthMap:
             while j + 1 < len(known) and known[j + 1] <= b:
                 j += 1
             rows = by_bin.get(b)
-            if rows and self.kind.get(b) == SUSPECT and b in self.shared:
-                rows = None  # only samples on its sides, which may be the next column's
+            if rows and self._sides_only(b):
+                rows = None
             if rows and len(rows) > 1:
                 starts.append(b_lo)
                 values.append(rows[0][1])
@@ -568,6 +568,10 @@ class DepthMap:
         self._integral = (self.version, starts, integral, values)
         return starts, integral, values
 
+    def _sides_only(self, b: int) -> bool:
+        """Whether bin ``b`` has only samples on its sides, which may be the next
+        column's, and a neighbour's value for it: the profile takes that value."""
+        return self.kind.get(b) == SUSPECT and b in self.shared
 
     def steps(self) -> list[tuple[float, float, float, float]]:
         """The profile's steps (``_steps``): (a, z, depth at a, depth at z), by a."""
