@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 from agent.depthmap import DepthMap
 from agent.partition import SegmentView, shared_boundary
-from agent.patrol import Motion, Patrol, PatrolConfig, Steer, TeamInput
+from agent.patrol import IN_LEG, Motion, Patrol, PatrolConfig, Steer, TeamInput
 from agent.phase import (
     TWO_PI,
     arc_may_begin,
@@ -323,9 +323,18 @@ class Controller:
             middle = level + 0.5 * math.pi / view.passes
             time_left = wrap_pi(middle - lead - self.phase_des) / rate
             fast, slow = p.to_go(y, self.lo, self.hi, self.hurry)
-            return leg_speed(time_left, fast, slow, steer.measuring, lim.v_max,
-                             p.config.measure_speed, p.config.min_leg_speed,
-                             p.config.fine_speed)
+            v = leg_speed(time_left, fast, slow, steer.measuring, lim.v_max,
+                          p.config.measure_speed, p.config.min_leg_speed,
+                          p.config.fine_speed)
+            if steer.measuring and steer.dither is not None and v > 0.0:
+                # a slow stretch's first tick a little longer, onto the offset it is
+                # given of the lattice its ticks then follow: they fall at a new offset
+                # from the edges it crosses (PatrolConfig.dither_zones)
+                step = v * dt
+                along = y if steer.motion in IN_LEG else -y
+                extra = (steer.dither * step - (along + step)) % step
+                v = min(lim.v_max, v + extra / dt)
+            return v
         if view.turned > p.config.arc_begun_rad:
             return self._arc_speed(steer, dt)
         if self.hurry or arc_may_begin(

@@ -7,6 +7,7 @@ import dataclasses
 import itertools
 import math
 import statistics
+from collections.abc import Callable
 
 import pytest
 
@@ -887,3 +888,44 @@ def test_an_aimed_leg_begins_on_the_line_it_is_aimed_at():
     aimed = [off for off, by in starts if by > 0.02]
     assert len(aimed) >= 5, starts
     assert max(aimed) < 0.01, sorted(aimed)
+
+
+def test_legs_cross_the_edge_at_every_offset_from_their_ticks():
+    """A leg measuring at 0.1 m/s moves 1 cm a tick, and the edge is taken at the
+    middle of the two ticks about it: if leg after leg crossed at the same offset from
+    its ticks, every crossing would be off the same way (on half-algae without
+    ``dither_zones`` two robots of three averaged 1.1 and 1.2 mm above the edge). The
+    first tick of each slow stretch puts the ticks at a new offset: every robot's
+    crossings fall over the whole tick, and their mean is on the edge."""
+    gmap = load_map("half-algae", 0.05, 1)
+    n = 3
+    world = World(gmap, n, "in-phase", seed=1)
+    info = world.info()
+    e0, e1 = info["edge_lo"], info["edge_hi"]
+    ctrls = [Controller(i, *initial_segment(i, n, e0, e1), e0, e1, world.truth(i)[0])
+             for i in range(n)]
+    offsets: list[list[float]] = [[] for _ in range(n)]  # (the middle - the edge) / tick
+    for i, c in enumerate(ctrls):
+        def cross(s: float, y: float, kind: int = PRECISE, i: int = i,
+                  record: Callable[..., None] = c.depth_map.cross) -> None:
+            if kind == PRECISE:
+                offsets[i].append((y - gmap.edge_y(s)) / 0.01)
+            record(s, y, kind)
+        c.depth_map.cross = cross  # type: ignore[method-assign]
+    published: list[Neighbour | None] = [None] * n
+    for _ in range(12000):
+        outs = []
+        for i, c in enumerate(ctrls):
+            r = world.sense(i)
+            x, y, th = world.truth(i)
+            outs.append(c.step(0.1, x, y, th, r.ice, r.algae,
+                               published[i - 1] if i else None,
+                               published[i + 1] if i + 1 < n else None, i > 0, i + 1 < n))
+        published = [c.published for c in ctrls]
+        world.step({i: (o.v, o.omega) for i, o in enumerate(outs)}, 0.1)
+    for seen in offsets:
+        assert len(seen) >= 60
+        assert all(-0.5 <= f <= 0.5 for f in seen)
+        assert abs(statistics.fmean(seen)) < 0.06, statistics.fmean(seen)  # 0.6 mm
+        fifths = [sum(-0.5 + 0.2 * j <= f < -0.3 + 0.2 * j for f in seen) for j in range(5)]
+        assert min(fifths) >= 0.12 * len(seen), fifths
