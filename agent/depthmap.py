@@ -40,6 +40,8 @@ SUSPECT, ROUGH, PRECISE = 0, 1, 2
 # measuring speed against one of 5 cm at full speed.
 WEIGHT = {PRECISE: 25.0, ROUGH: 1.0, SUSPECT: 1.0}
 SMOOTH_M = 0.05  # a depth sample is averaged with the samples this close to it
+ROUGH_SD_M = 0.05 / math.sqrt(12.0)  # a ROUGH sample's noise: a 5 cm tick, uniform
+SLOPE_SIGNIFICANCE = 2.0  # standard errors: a slope this sure is followed, not averaged
 AGREE_M = 0.05  # that measured within this of it (across a step they differ more)
 SPIKE_SPAN_M = 0.1  # a lone sample between two this close may be a stray (``_profile``)
 # The algae may change while the team patrols (issue 18). A sample that contradicts
@@ -636,29 +638,41 @@ def _steps(kept: list[tuple[float, float]]) -> list[tuple[float, float, float, f
 
 
 def _smoothed(samples: list[tuple[float, float, int]]) -> list[tuple[float, bool]]:
-    """Each sample's depth (samples sorted by place) as the weighted mean of the
-    samples within SMOOTH_M of it that agree with it to AGREE_M: noise averages out
-    along a column, a step between columns stays where the samples put it. With it,
-    whether no other sample there agrees with it (while some other sample is there)."""
+    """Each sample's depth (samples sorted by place) smoothed with the samples within
+    SMOOTH_M of it that agree with it to AGREE_M: their weighted mean, or where they
+    slope more than their noise explains (SLOPE_SIGNIFICANCE), the line fitted through
+    them, at its place. Noise averages out along a column, a step between columns stays
+    where the samples put it, and on a steep slope (a bloom's side, 3 cm of depth a cm
+    along the edge) a sample at the end of a cluster is not pulled towards the
+    cluster's middle: a mean there held 7 cm of a slope 2.5 cm too deep (0.002 m^2).
+    With it, whether no other sample there agrees with it (while some other sample
+    is there)."""
     out = []
     lo = 0
     n = len(samples)
     for p, d, _ in samples:
         while samples[lo][0] < p - SMOOTH_M:
             lo += 1
-        total = weight = 0.0
-        agree = near = 0
+        near = []
         k = lo
         while k < n and samples[k][0] <= p + SMOOTH_M:
             q = samples[k]
-            near += 1
             if abs(q[1] - d) <= AGREE_M:
-                w = WEIGHT[q[2]]
-                total += w * q[1]
-                weight += w
-                agree += 1
+                near.append((q[0] - p, q[1], WEIGHT[q[2]]))
             k += 1
-        out.append((total / weight, agree == 1 and near > 1))
+        weight = sum(w for _, _, w in near)
+        mean_u = sum(w * u for u, _, w in near) / weight
+        mean_v = sum(w * v for _, v, w in near) / weight
+        value = mean_v
+        if len(near) >= 3:
+            suu = sum(w * (u - mean_u) ** 2 for u, _, w in near)
+            if suu > 0.0:
+                slope = sum(w * (u - mean_u) * (v - mean_v) for u, v, w in near) / suu
+                # WEIGHT is an inverse variance in units of a ROUGH sample's (a tick of
+                # 5 cm: 5 cm / sqrt(12)), so the slope's standard error is this
+                if abs(slope) > SLOPE_SIGNIFICANCE * ROUGH_SD_M / math.sqrt(suu):
+                    value = mean_v - slope * mean_u  # the line at u = 0, the sample's place
+        out.append((value, len(near) == 1 and k - lo > 1))
     return out
 
 
