@@ -951,3 +951,21 @@ def test_a_slope_sampled_unevenly_is_integrated_as_the_line_it_is():
     for s in (0.72, 0.74, 0.76, 0.775, 0.79, 0.81, 0.83, 0.85):
         steps.record(s, 0.4 if s < 0.8 else 1.1, PRECISE)
     assert steps.average(0.72, 0.85) == pytest.approx((0.08 * 0.4 + 0.05 * 1.1) / 0.13)
+
+
+def test_a_fast_sample_on_a_bins_side_between_two_depths_is_left_out():
+    """A sample taken at full speed (ROUGH, a tick of 5 cm) on a bin's side between two
+    columns reads between them, near the line between its neighbours: where its bin
+    has other samples it is left out of the profile. Fast samples elsewhere are kept."""
+    dm = DepthMap(0.0, 0.1, 0.3)
+    for s in (0.52, 0.55, 0.583):
+        dm.record(s, 0.62, PRECISE)
+    dm.record(0.5996, 0.41, ROUGH)
+    for s in (0.61, 0.63, 0.66):
+        dm.record(s, 0.30, PRECISE)
+    assert dm.average(0.52, 0.66) == pytest.approx((0.08 * 0.62 + 0.06 * 0.30) / 0.14)
+    fast = DepthMap(0.0, 0.1, 0.3)
+    for s in (0.72, 0.75, 0.78):
+        fast.record(s, 0.9, ROUGH)
+    fast.record(0.85, 0.5, ROUGH)
+    assert fast.average(0.7, 0.9) == pytest.approx((0.1 * 0.9 + 0.1 * 0.5) / 0.2)
