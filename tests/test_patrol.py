@@ -969,3 +969,20 @@ def test_a_fast_sample_on_a_bins_side_between_two_depths_is_left_out():
         fast.record(s, 0.9, ROUGH)
     fast.record(0.85, 0.5, ROUGH)
     assert fast.average(0.7, 0.9) == pytest.approx((0.1 * 0.9 + 0.1 * 0.5) / 0.2)
+
+
+def test_a_bin_only_a_neighbour_has_measured_is_measured_near_its_depth():
+    """The last centimetres of a segment in a bin the neighbour has measured: the leg
+    goes slowly near the neighbour's depth, not the whole way down as on a column
+    nobody has measured."""
+    cfg = PatrolConfig()
+    dm = DepthMap(0.0, 0.1, cfg.min_depth_m)
+    dm.record(0.35, 0.5, PRECISE)
+    dm.cross(0.35, 0.0)
+    dm.learn(((4, 1.2),))
+    assert dm.expected_depths(0.45) == (1.2,)
+    assert dm.expected_depths(0.55) == ()  # nobody's
+    patrol = Patrol(cfg, dm, x=0.43)
+    patrol.motion, patrol.in_leg = Motion.UNDER, InLeg(entry_y=0.0, from_water=True)
+    slow = [patrol._measuring(0.43, y, False) for y in (0.3, 0.6, 1.0, 1.15, 1.3)]
+    assert slow == [False, False, False, True, False]
