@@ -155,9 +155,11 @@ class Controller:
         self.lo, self.hi = lo, hi
         if ring_length is None:  # its bins as the listeners of its states count them
             self.depth_map = DepthMap(edge_lo, cfg.bin_m, cfg.min_depth_m,
-                                      bins=edge_bins(edge_lo, edge_hi, cfg.bin_m), edge_hi=edge_hi)
+                                      bins=edge_bins(edge_lo, edge_hi, cfg.bin_m), edge_hi=edge_hi,
+                                      refined=cfg.refined_measuring)
         else:
-            self.depth_map = DepthMap(0.0, ring_bins(ring_length, cfg.bin_m), cfg.min_depth_m)
+            self.depth_map = DepthMap(0.0, ring_bins(ring_length, cfg.bin_m), cfg.min_depth_m,
+                                      refined=cfg.refined_measuring)
         self.patrol = Patrol(cfg, self.depth_map, x, direction=1)
         self.phase_des: float | None = None
         self.turns = 0.0  # phi_des unwrapped: the count of sweeps the pass grid walks by
@@ -329,7 +331,7 @@ class Controller:
             if steer.measuring and steer.dither is not None and v > 0.0:
                 # a slow stretch's first tick a little longer, onto the offset it is
                 # given of the lattice its ticks then follow: they fall at a new offset
-                # from the edges it crosses (PatrolConfig.dither_zones)
+                # from the edges it crosses (PatrolConfig.refined_measuring)
                 step = v * dt
                 along = y if steer.motion in IN_LEG else -y
                 extra = (steer.dither * step - (along + step)) % step

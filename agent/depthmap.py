@@ -106,6 +106,10 @@ class DepthMap:
     # where the edge ends (None: not bounded): a sample past it is of no column of the
     # edge, and the profile leaves it out (``_profile``)
     edge_hi: float | None = None
+    # PatrolConfig.refined_measuring: smooth along a significant slope, leave out a fast
+    # sample on a bin's side between two depths, expect a neighbour's depth in a bin
+    # only it has measured (off: the map of b3c822c, bit for bit)
+    refined: bool = False
     depths: dict[int, float] = field(default_factory=dict)
     samples: dict[int, list[float]] = field(default_factory=dict)
     recorded: int = 0  # samples recorded so far, over all bins
@@ -498,7 +502,7 @@ class DepthMap:
         own = inside or own
         by_bin: dict[int, list[tuple[float, float]]] = {}  # bin -> (place, smoothed depth)
         lone: dict[int, list[tuple[float, float]]] = {}  # bin -> its mixed side samples
-        smoothed = _smoothed(own)
+        smoothed = _smoothed(own, self.refined)
         for i, ((p, _, kind), (v, alone)) in enumerate(zip(own, smoothed, strict=True)):
             b = self.bin_of(p)
             # A sample on a bin's side that no sample near it agrees with, off the line
@@ -521,7 +525,8 @@ class DepthMap:
                 # two depths is no better than a mixed reading, on their line or not: one
                 # between columns of 0.62 and 0.30 m read 0.41 m, 1.2 cm off their line,
                 # and held 9 mm of its bin (1.8 mm^2)
-                blurred = kind == ROUGH and self.on_side(p) and abs(vz - va) > AGREE_M
+                blurred = (self.refined and kind == ROUGH and self.on_side(p)
+                           and abs(vz - va) > AGREE_M)
                 if blurred or abs(v - line) > AGREE_M:
                     lone.setdefault(b, []).append((p, v))
                     continue
@@ -621,7 +626,7 @@ class DepthMap:
         at the measuring speed, 13 s where its neighbours took 5, and put the team's
         phase a pass out for a minute: 0.047 rad on the thesis's random algae.)"""
         b = self.bin_of(s)
-        depth = self.depths.get(b, self.shared.get(b))
+        depth = self.depths.get(b, self.shared.get(b) if self.refined else None)
         if depth is None:
             return ()
         steps = self.steps()
@@ -646,7 +651,8 @@ def _steps(kept: list[tuple[float, float]]) -> list[tuple[float, float, float, f
             if abs(vz - va) > AGREE_M and agree(i, i - 1) and agree(i + 1, i + 2)]
 
 
-def _smoothed(samples: list[tuple[float, float, int]]) -> list[tuple[float, bool]]:
+def _smoothed(samples: list[tuple[float, float, int]],
+              follow_slopes: bool = True) -> list[tuple[float, bool]]:
     """Each sample's depth (samples sorted by place) smoothed with the samples within
     SMOOTH_M of it that agree with it to AGREE_M: their weighted mean, or where they
     slope more than their noise explains (SLOPE_SIGNIFICANCE), the line fitted through
@@ -673,7 +679,7 @@ def _smoothed(samples: list[tuple[float, float, int]]) -> list[tuple[float, bool
         mean_u = sum(w * u for u, _, w in near) / weight
         mean_v = sum(w * v for _, v, w in near) / weight
         value = mean_v
-        if len(near) >= 3:
+        if follow_slopes and len(near) >= 3:
             suu = sum(w * (u - mean_u) ** 2 for u, _, w in near)
             if suu > 0.0:
                 slope = sum(w * (u - mean_u) * (v - mean_v) for u, v, w in near) / suu

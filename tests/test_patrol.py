@@ -894,16 +894,18 @@ def test_legs_cross_the_edge_at_every_offset_from_their_ticks():
     """A leg measuring at 0.1 m/s moves 1 cm a tick, and the edge is taken at the
     middle of the two ticks about it: if leg after leg crossed at the same offset from
     its ticks, every crossing would be off the same way (on half-algae without
-    ``dither_zones`` two robots of three averaged 1.1 and 1.2 mm above the edge). The
+    ``refined_measuring`` two robots of three averaged 1.1 and 1.2 mm above the edge). The
     first tick of each slow stretch puts the ticks at a new offset: every robot's
-    crossings fall over the whole tick, and their mean is on the edge."""
+    crossings fall over the whole tick, and their mean is on the edge. (Off by
+    default: see PatrolConfig.refined_measuring.)"""
     gmap = load_map("half-algae", 0.05, 1)
     n = 3
     world = World(gmap, n, "in-phase", seed=1)
     info = world.info()
     e0, e1 = info["edge_lo"], info["edge_hi"]
-    ctrls = [Controller(i, *initial_segment(i, n, e0, e1), e0, e1, world.truth(i)[0])
-             for i in range(n)]
+    cfg = PatrolConfig(refined_measuring=True)
+    ctrls = [Controller(i, *initial_segment(i, n, e0, e1), e0, e1, world.truth(i)[0],
+                        patrol=cfg) for i in range(n)]
     offsets: list[list[float]] = [[] for _ in range(n)]  # (the middle - the edge) / tick
     for i, c in enumerate(ctrls):
         def cross(s: float, y: float, kind: int = PRECISE, i: int = i,
@@ -939,7 +941,7 @@ def test_a_slope_sampled_unevenly_is_integrated_as_the_line_it_is():
     def depth(s: float) -> float:
         return 1.2 - (s - 0.2)  # 1 cm of depth a cm along the edge
 
-    dm = DepthMap(0.0, 0.1, 0.3)
+    dm = DepthMap(0.0, 0.1, 0.3, refined=True)
     places = ([0.305 + 0.004 * k for k in range(7)] + [0.362]
               + [0.38 + 0.003 * k for k in range(6)])
     for s in places:
@@ -947,7 +949,7 @@ def test_a_slope_sampled_unevenly_is_integrated_as_the_line_it_is():
     a, z = places[0], places[-1]
     assert dm.average(a, z) * (z - a) == pytest.approx(0.5 * (depth(a) + depth(z)) * (z - a),
                                                        abs=1e-6)
-    steps = DepthMap(0.0, 0.1, 0.3)
+    steps = DepthMap(0.0, 0.1, 0.3, refined=True)
     for s in (0.72, 0.74, 0.76, 0.775, 0.79, 0.81, 0.83, 0.85):
         steps.record(s, 0.4 if s < 0.8 else 1.1, PRECISE)
     assert steps.average(0.72, 0.85) == pytest.approx((0.08 * 0.4 + 0.05 * 1.1) / 0.13)
@@ -957,14 +959,14 @@ def test_a_fast_sample_on_a_bins_side_between_two_depths_is_left_out():
     """A sample taken at full speed (ROUGH, a tick of 5 cm) on a bin's side between two
     columns reads between them, near the line between its neighbours: where its bin
     has other samples it is left out of the profile. Fast samples elsewhere are kept."""
-    dm = DepthMap(0.0, 0.1, 0.3)
+    dm = DepthMap(0.0, 0.1, 0.3, refined=True)
     for s in (0.52, 0.55, 0.583):
         dm.record(s, 0.62, PRECISE)
     dm.record(0.5996, 0.41, ROUGH)
     for s in (0.61, 0.63, 0.66):
         dm.record(s, 0.30, PRECISE)
     assert dm.average(0.52, 0.66) == pytest.approx((0.08 * 0.62 + 0.06 * 0.30) / 0.14)
-    fast = DepthMap(0.0, 0.1, 0.3)
+    fast = DepthMap(0.0, 0.1, 0.3, refined=True)
     for s in (0.72, 0.75, 0.78):
         fast.record(s, 0.9, ROUGH)
     fast.record(0.85, 0.5, ROUGH)
@@ -976,7 +978,7 @@ def test_a_bin_only_a_neighbour_has_measured_is_measured_near_its_depth():
     goes slowly near the neighbour's depth, not the whole way down as on a column
     nobody has measured."""
     cfg = PatrolConfig()
-    dm = DepthMap(0.0, 0.1, cfg.min_depth_m)
+    dm = DepthMap(0.0, 0.1, cfg.min_depth_m, refined=True)
     dm.record(0.35, 0.5, PRECISE)
     dm.cross(0.35, 0.0)
     dm.learn(((4, 1.2),))
