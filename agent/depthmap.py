@@ -676,10 +676,10 @@ def _smoothed(samples: list[tuple[float, float, int]],
                 near.append((q[0] - p, q[1], WEIGHT[q[2]]))
             k += 1
         weight = sum(w for _, _, w in near)
-        mean_u = sum(w * u for u, _, w in near) / weight
         mean_v = sum(w * v for _, v, w in near) / weight
         value = mean_v
         if follow_slopes and len(near) >= 3:
+            mean_u = sum(w * u for u, _, w in near) / weight
             suu = sum(w * (u - mean_u) ** 2 for u, _, w in near)
             if suu > 0.0:
                 slope = sum(w * (u - mean_u) * (v - mean_v) for u, v, w in near) / suu
